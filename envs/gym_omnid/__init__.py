@@ -1,0 +1,1 @@
+"""Multi-view MuJoCo benchmark envs."""

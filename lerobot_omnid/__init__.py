@@ -1,0 +1,1 @@
+"""OmniD for LeRobot."""
