@@ -1,1 +1,5 @@
-"""OmniD for LeRobot."""
+"""OmniD for LeRobot: importing this package registers the ``omnid`` policy and env configs."""
+
+from lerobot_omnid.configuration_omnid import OmniDConfig
+
+__all__ = ["OmniDConfig"]

@@ -91,14 +91,16 @@ class CameraCalibration:
         try:
             distortion = tuple(float(d) for d in distortion)
         except (TypeError, ValueError) as e:
-            raise CalibrationError(f"{camera}.distortion: expected a list of numbers, got {distortion!r}") from e
+            raise CalibrationError(
+                f"{camera}.distortion: expected a list of numbers, got {distortion!r}"
+            ) from e
         calib = cls(K=K, T_cam_world=T, image_size=(size[0], size[1]), distortion=distortion)
         calib.validate(camera)
         return calib
 
     def validate(self, camera: str = "camera") -> None:
         """Check that K is an upper-triangular pinhole matrix and T_cam_world a rigid transform."""
-        (fx, s, cx), (z0, fy, cy), bottom = self.K
+        (fx, _, _), (z0, fy, _), bottom = self.K
         if fx <= 0 or fy <= 0 or z0 != 0 or bottom != (0.0, 0.0, 1.0):
             raise CalibrationError(
                 f"{camera}.K: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {self.K}"
@@ -134,22 +136,6 @@ class CameraCalibration:
         if self.distortion:
             out["distortion"] = list(self.distortion)
         return out
-
-    def resized(self, height: int, width: int) -> CameraCalibration:
-        """Calibration of the same camera after resizing the whole image to ``(height, width)``.
-
-        With pixel centres at integer coordinates, a resize by factor s maps u to (u + 0.5) * s - 0.5.
-        """
-        sy = height / self.image_size[0]
-        sx = width / self.image_size[1]
-        (fx, skew, cx), (_, fy, cy), _ = self.K
-        K = (
-            (fx * sx, skew * sx, (cx + 0.5) * sx - 0.5),
-            (0.0, fy * sy, (cy + 0.5) * sy - 0.5),
-            (0.0, 0.0, 1.0),
-        )
-        return CameraCalibration(K=K, T_cam_world=self.T_cam_world, image_size=(height, width),
-                                 distortion=self.distortion)
 
 
 def calibration_from_feature_info(feature_key: str, feature: Mapping[str, Any]) -> CameraCalibration:

@@ -1,0 +1,291 @@
+"""Configuration of the OmniD policy (multi-view BEV features by deformable attention + diffusion head)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from lerobot.configs import FeatureType, NormalizationMode, PreTrainedConfig
+from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
+
+from lerobot_omnid.calibration import (
+    CALIBRATION_INFO_KEY,
+    CalibrationError,
+    CameraCalibration,
+    calibration_from_feature_info,
+)
+from lerobot_omnid.geometry import AXES, FeatureVolume
+
+BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
+NOISE_SCHEDULERS = ("DDPM", "DDIM")
+PREDICTION_TYPES = ("epsilon", "sample")
+
+
+@PreTrainedConfig.register_subclass("omnid")
+@dataclass
+class OmniDConfig(PreTrainedConfig):
+    """Configuration of OmniDPolicy. Defaults follow the paper (section 3, DESIGN.md).
+
+    Fields a user will most likely change: ``volume_bounds`` (the workspace of the robot, in its base
+    frame), ``resize_shape`` and the model sizes (``d_model``, ``num_layers``, ``volume_shape``,
+    ``down_dims``) to fit the hardware, ``num_inference_steps`` with ``noise_scheduler_type="DDIM"`` for
+    fast evaluation. ``camera_calibration`` is filled from the dataset when the policy is made; every
+    ``observation.images.*`` input needs an entry.
+
+    Args:
+        n_obs_steps: Number of observation steps (current and previous) the policy conditions on.
+        horizon: Number of action steps predicted by the diffusion head.
+        n_action_steps: Number of predicted actions executed before predicting again.
+        drop_n_last_frames: Frames at the end of each episode not used as training start points.
+        normalization_mapping: Normalisation per feature type. Images are not normalised with dataset
+            statistics (IDENTITY): the backbone normalises with fixed ImageNet statistics, so a camera that
+            was not in the training set (fine-tuning, evaluation on a new view) is handled like the others.
+        camera_calibration: Per image feature key, the calibration dict of
+            :class:`lerobot_omnid.calibration.CameraCalibration` (K, T_cam_world, image_size). Copied from
+            the dataset's feature info by ``set_dataset_feature_metadata``; saved in ``config.json``.
+        cameras: Which of the dataset's cameras the policy uses, by name ("cam_b") or feature key
+            ("observation.images.cam_b"); None uses every image feature of the dataset.
+        vision_backbone: torchvision ResNet shared by all cameras ("resnet18"; "resnet101" for the
+            paper's ablation).
+        pretrained_backbone_weights: Path to a local torchvision state dict for the backbone, or None for
+            random initialisation. Nothing is downloaded.
+        use_group_norm: Replace BatchNorm by GroupNorm (16 channels per group) in the backbone; BatchNorm
+            statistics are unreliable with small batches of correlated frames.
+        backbone_layer: Last ResNet stage used: 4 gives stride-32 features (as the authors' code), 3 gives
+            stride-16 features (better for small images).
+        resize_shape: (height, width) images are resized to before the backbone, intrinsics rescaled
+            accordingly; None keeps the input size. Cropping is not offered: it would break calibration.
+        use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
+            concatenated in camera order instead of the 3D feature (then the cameras are fixed).
+        volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
+            base frame, metres.
+        volume_shape: Cells along (x, y, z).
+        pillar_axis: Axis folded into pillars: one query per cell of the plane spanned by the two other
+            axes, with one reference anchor per cell along the pillar. Default "z": a true bird's-eye
+            plane over the table. (The authors' code used "y": an x-z plane.)
+        d_model: Width of queries and sampled values.
+        num_heads: Attention heads (each samples its own locations).
+        num_layers: Layers of (query self-attention, camera cross-attention, feed-forward).
+        num_points: Sampling points per anchor, per camera and head.
+        ffn_dim: Hidden width of each layer's feed-forward network.
+        dropout: Dropout in the OFG layers.
+        use_self_attention: Whether each layer starts with self-attention among the plane queries.
+        compressed_channels: Channels kept per query after the final 1x1 compression; the condition of
+            the diffusion head has ``num_queries * compressed_channels`` entries per observation step.
+        query_chunk_size: Queries sampled at a time; bounds the memory of the sampling step.
+        checkpoint_sampling: Recompute sampled features in the backward pass instead of storing them
+            (much less memory at the paper's grid, about 30% more OFG compute).
+        spatial_softmax_num_keypoints: Keypoints per camera in the "w/o OFG" ablation.
+        down_dims, kernel_size, n_groups, diffusion_step_embed_dim, use_film_scale_modulation,
+            gradient_checkpointing: LeRobot's `DiffusionConditionalUnet1d` settings.
+        noise_scheduler_type: "DDPM" (training schedule of the paper) or "DDIM" (fewer inference steps).
+        num_train_timesteps, beta_schedule, beta_start, beta_end, prediction_type, clip_sample,
+            clip_sample_range: diffusers scheduler settings; the loss is on epsilon by default.
+        num_inference_steps: Denoising steps at inference (None: ``num_train_timesteps``).
+        do_mask_loss_for_padding: Mask the loss on copy-padded actions at episode ends.
+        optimizer_*: AdamW settings (paper: AdamW, lr 1e-4).
+        scheduler_name, scheduler_warmup_steps: cosine schedule with 500 warm-up steps (paper).
+    """
+
+    # Inputs / outputs.
+    n_obs_steps: int = 2
+    horizon: int = 16
+    n_action_steps: int = 8
+    drop_n_last_frames: int = 7  # horizon - n_action_steps - n_obs_steps + 1
+    normalization_mapping: dict[str, NormalizationMode] = field(
+        default_factory=lambda: {
+            "VISUAL": NormalizationMode.IDENTITY,
+            "STATE": NormalizationMode.MIN_MAX,
+            "ACTION": NormalizationMode.MIN_MAX,
+        }
+    )
+    camera_calibration: dict[str, dict] = field(default_factory=dict)
+    cameras: list[str] | None = None
+
+    # Image backbone.
+    vision_backbone: str = "resnet18"
+    pretrained_backbone_weights: str | None = None
+    use_group_norm: bool = True
+    backbone_layer: int = 4
+    resize_shape: tuple[int, int] | None = None
+
+    # Omni-Feature Generator.
+    use_ofg: bool = True
+    volume_bounds: tuple[tuple[float, float], ...] = ((0.0, 1.152), (-0.64, 0.64), (0.0, 0.768))
+    volume_shape: tuple[int, int, int] = (64, 16, 64)
+    pillar_axis: str = "z"
+    d_model: int = 128
+    num_heads: int = 4
+    num_layers: int = 6
+    num_points: int = 1
+    ffn_dim: int = 256
+    dropout: float = 0.1
+    use_self_attention: bool = True
+    compressed_channels: int = 1
+    query_chunk_size: int = 512
+    checkpoint_sampling: bool = True
+    spatial_softmax_num_keypoints: int = 32
+
+    # Diffusion head (LeRobot's conditional 1D UNet).
+    down_dims: tuple[int, ...] = (512, 1024, 2048)
+    kernel_size: int = 5
+    n_groups: int = 8
+    diffusion_step_embed_dim: int = 128
+    use_film_scale_modulation: bool = True
+    gradient_checkpointing: bool = False
+    noise_scheduler_type: str = "DDPM"
+    num_train_timesteps: int = 100
+    beta_schedule: str = "squaredcos_cap_v2"
+    beta_start: float = 0.0001
+    beta_end: float = 0.02
+    prediction_type: str = "epsilon"
+    clip_sample: bool = True
+    clip_sample_range: float = 1.0
+    num_inference_steps: int | None = None
+    do_mask_loss_for_padding: bool = False
+
+    # Training presets.
+    optimizer_lr: float = 1e-4
+    optimizer_betas: tuple[float, float] = (0.95, 0.999)
+    optimizer_eps: float = 1e-8
+    optimizer_weight_decay: float = 1e-6
+    scheduler_name: str = "cosine"
+    scheduler_warmup_steps: int = 500
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_choice("vision_backbone", self.vision_backbone, BACKBONES)
+        _check_choice("noise_scheduler_type", self.noise_scheduler_type, NOISE_SCHEDULERS)
+        _check_choice("prediction_type", self.prediction_type, PREDICTION_TYPES)
+        _check_choice("pillar_axis", self.pillar_axis, AXES)
+        _check_choice("backbone_layer", self.backbone_layer, (3, 4))
+        for name in (
+            "d_model",
+            "num_heads",
+            "num_layers",
+            "num_points",
+            "ffn_dim",
+            "compressed_channels",
+            "query_chunk_size",
+            "n_obs_steps",
+            "horizon",
+            "n_action_steps",
+        ):
+            if getattr(self, name) < 1:
+                raise ValueError(f"`{name}` must be a positive integer, got {getattr(self, name)}")
+        if self.d_model % self.num_heads:
+            raise ValueError(
+                f"`d_model` ({self.d_model}) must be divisible by `num_heads` ({self.num_heads})"
+            )
+        if self.n_action_steps > self.horizon - self.n_obs_steps + 1:
+            raise ValueError(
+                f"`n_action_steps` must be <= horizon - n_obs_steps + 1 = "
+                f"{self.horizon - self.n_obs_steps + 1}, got {self.n_action_steps}"
+            )
+        downsampling = 2 ** len(self.down_dims)
+        if self.horizon % downsampling:
+            raise ValueError(
+                f"`horizon` ({self.horizon}) must be a multiple of 2**len(down_dims) = {downsampling}"
+            )
+        if self.resize_shape is not None and (len(self.resize_shape) != 2 or min(self.resize_shape) < 1):
+            raise ValueError(f"`resize_shape` must be (height, width) positive ints, got {self.resize_shape}")
+        self.volume_bounds = tuple(tuple(float(v) for v in b) for b in self.volume_bounds)
+        self.volume_shape = tuple(int(n) for n in self.volume_shape)
+        try:
+            self.feature_volume  # noqa: B018  (validates bounds and shape)
+        except ValueError as e:
+            raise ValueError(f"`volume_bounds` / `volume_shape`: {e}") from e
+        for key, calib in self.camera_calibration.items():
+            CameraCalibration.from_dict(calib, camera=key)
+
+    @property
+    def feature_volume(self) -> FeatureVolume:
+        return FeatureVolume(bounds=self.volume_bounds, shape=self.volume_shape, pillar_axis=self.pillar_axis)
+
+    def calibration(self, image_key: str) -> CameraCalibration:
+        """The calibration of one image feature, or a clear error naming it."""
+        if image_key not in self.camera_calibration:
+            raise CalibrationError(
+                f"{image_key}: no camera calibration in the policy config (calibrated cameras: "
+                f"{sorted(self.camera_calibration) or 'none'}). Train on a dataset whose image features "
+                f"carry info['calibration'], or set `camera_calibration`."
+            )
+        return CameraCalibration.from_dict(self.camera_calibration[image_key], camera=image_key)
+
+    def set_dataset_feature_metadata(self, dataset_features: dict[str, dict[str, Any]]) -> None:
+        """Called by LeRobot's ``make_policy`` with the dataset's features: take their calibrations.
+
+        The calibration of every image feature of the dataset replaces what the config had (so
+        fine-tuning a checkpoint on a dataset with new cameras uses the new calibrations), and the
+        policy's image inputs become the dataset's image features: the OFG does not depend on the
+        number or identity of cameras.
+        """
+        image_keys = [
+            k
+            for k, ft in dataset_features.items()
+            if k.startswith("observation.image") and ft.get("dtype") in ("video", "image")
+        ]
+        if self.cameras is not None:
+            wanted = [
+                c if c.startswith("observation.image") else f"observation.images.{c}" for c in self.cameras
+            ]
+            missing = [k for k in wanted if k not in image_keys]
+            if missing:
+                raise ValueError(f"`cameras`: {missing} not among the dataset's image features {image_keys}")
+            image_keys = wanted
+        # The "w/o OFG" ablation does not use calibration: keep whatever the dataset has.
+        self.camera_calibration = {
+            k: calibration_from_feature_info(k, dataset_features[k]).to_dict()
+            for k in image_keys
+            if self.use_ofg or CALIBRATION_INFO_KEY in (dataset_features[k].get("info") or {})
+        }
+        if self.input_features:
+            from lerobot.datasets.feature_utils import dataset_to_policy_features
+
+            policy_features = dataset_to_policy_features(dataset_features)
+            dataset_images = {k: policy_features[k] for k in image_keys}
+            others = {k: ft for k, ft in self.input_features.items() if ft.type is not FeatureType.VISUAL}
+            self.input_features = {**others, **dataset_images}
+
+    def validate_features(self) -> None:
+        if not self.image_features:
+            raise ValueError("OmniD needs at least one `observation.images.*` input feature.")
+        if self.robot_state_feature is None:
+            raise ValueError("OmniD needs `observation.state` among the input features.")
+        for key, ft in self.image_features.items():
+            if len(ft.shape) != 3 or ft.shape[0] != 3:
+                raise ValueError(f"{key}: expected an RGB image feature of shape (3, H, W), got {ft.shape}")
+            if self.use_ofg:
+                self.calibration(key)
+        if not self.use_ofg:
+            shapes = {ft.shape for ft in self.image_features.values()}
+            if len(shapes) > 1:
+                raise ValueError(f"Without the OFG all images must share one shape, got {sorted(shapes)}")
+
+    def get_optimizer_preset(self) -> AdamWConfig:
+        return AdamWConfig(
+            lr=self.optimizer_lr,
+            betas=self.optimizer_betas,
+            eps=self.optimizer_eps,
+            weight_decay=self.optimizer_weight_decay,
+        )
+
+    def get_scheduler_preset(self) -> DiffuserSchedulerConfig:
+        return DiffuserSchedulerConfig(name=self.scheduler_name, num_warmup_steps=self.scheduler_warmup_steps)
+
+    @property
+    def observation_delta_indices(self) -> list[int]:
+        return list(range(1 - self.n_obs_steps, 1))
+
+    @property
+    def action_delta_indices(self) -> list[int]:
+        return list(range(1 - self.n_obs_steps, 1 - self.n_obs_steps + self.horizon))
+
+    @property
+    def reward_delta_indices(self) -> None:
+        return None
+
+
+def _check_choice(name: str, value: Any, allowed: tuple) -> None:
+    if value not in allowed:
+        raise ValueError(f"`{name}` must be one of {list(allowed)}, got {value!r}")

@@ -1,0 +1,182 @@
+"""Camera geometry and the feature volume, as small pure batched functions.
+
+Frames are named in every identifier: ``cam_T_world`` maps world points into the OpenCV camera frame,
+``pix_T_cam`` is the intrinsics ``K``; point sets carry their frame (``xyz_world``, ``xyz_cam``,
+``uv_pix``). Pixel centres are at integer coordinates (OpenCV).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+AXES = ("x", "y", "z")
+DEPTH_EPS = 1e-3  # metres; points closer than this to the camera plane count as behind it.
+
+
+@dataclass(frozen=True)
+class FeatureVolume:
+    """Axis-aligned box in the world (robot base) frame, divided into cells, folded into pillars.
+
+    The query plane spans the two axes other than ``pillar_axis``; every plane cell owns one pillar of
+    ``shape[pillar_axis]`` anchor points (the cell centres along the pillar axis).
+
+    Args:
+        bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) in metres.
+        shape: number of cells along (x, y, z).
+        pillar_axis: "x", "y" or "z": the axis folded into pillars.
+    """
+
+    bounds: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+    shape: tuple[int, int, int]
+    pillar_axis: str = "z"
+
+    def __post_init__(self) -> None:
+        if self.pillar_axis not in AXES:
+            raise ValueError(f"pillar_axis must be one of {AXES}, got {self.pillar_axis!r}")
+        if len(self.bounds) != 3 or any(len(b) != 2 or not b[0] < b[1] for b in self.bounds):
+            raise ValueError(f"bounds must be three (min, max) pairs with min < max, got {self.bounds}")
+        if len(self.shape) != 3 or any(int(n) < 1 for n in self.shape):
+            raise ValueError(f"shape must be three positive cell counts, got {self.shape}")
+
+    @property
+    def plane_axes(self) -> tuple[int, int]:
+        """Indices of the two axes spanning the query plane, in x, y, z order."""
+        p = AXES.index(self.pillar_axis)
+        return tuple(i for i in range(3) if i != p)  # type: ignore[return-value]
+
+    @property
+    def plane_shape(self) -> tuple[int, int]:
+        a, b = self.plane_axes
+        return self.shape[a], self.shape[b]
+
+    @property
+    def num_queries(self) -> int:
+        a, b = self.plane_shape
+        return a * b
+
+    @property
+    def num_anchors(self) -> int:
+        return self.shape[AXES.index(self.pillar_axis)]
+
+    def cell_centers(self, axis: int) -> Tensor:
+        """(n,) centres of the cells along one axis, in metres."""
+        lo, hi = self.bounds[axis]
+        n = self.shape[axis]
+        step = (hi - lo) / n
+        return lo + step * (torch.arange(n, dtype=torch.float64) + 0.5)
+
+    def anchors_world(self) -> Tensor:
+        """(Q, A, 3) world xyz of every anchor; Q = plane cells in row-major plane order, A = pillar cells."""
+        a, b = self.plane_axes
+        p = AXES.index(self.pillar_axis)
+        ca, cb, cp = self.cell_centers(a), self.cell_centers(b), self.cell_centers(p)
+        grid_a, grid_b, grid_p = torch.meshgrid(ca, cb, cp, indexing="ij")  # (Na, Nb, A) each
+        xyz = torch.zeros(*grid_a.shape, 3, dtype=torch.float64)
+        xyz[..., a], xyz[..., b], xyz[..., p] = grid_a, grid_b, grid_p
+        return xyz.reshape(-1, self.num_anchors, 3).float()
+
+    def plane_coords_normalized(self) -> Tensor:
+        """(Q, 3) pillar centres mapped to [-1, 1]^3 within the volume (for positional embeddings)."""
+        lo = torch.tensor([b[0] for b in self.bounds])
+        hi = torch.tensor([b[1] for b in self.bounds])
+        centres = self.anchors_world().mean(dim=1)
+        return 2 * (centres - lo) / (hi - lo) - 1
+
+
+def apply_transform(T_b_a: Tensor, xyz_a: Tensor) -> Tensor:
+    """Map points from frame a to frame b.
+
+    Args:
+        T_b_a: (..., 4, 4) rigid transform.
+        xyz_a: (..., N, 3) points in frame a (leading dims broadcast with ``T_b_a``'s).
+    Returns:
+        (..., N, 3) points in frame b.
+    """
+    return xyz_a @ T_b_a[..., :3, :3].transpose(-1, -2) + T_b_a[..., None, :3, 3]
+
+
+def project_to_pixels(pix_T_cam: Tensor, xyz_cam: Tensor) -> tuple[Tensor, Tensor]:
+    """Pinhole projection with a guarded perspective divide.
+
+    Args:
+        pix_T_cam: (..., 3, 3) intrinsics K.
+        xyz_cam: (..., N, 3) points in the OpenCV camera frame.
+    Returns:
+        uv_pix: (..., N, 2) pixel coordinates (meaningless where ``in_front`` is False).
+        in_front: (..., N) bool, depth above ``DEPTH_EPS``.
+    """
+    depth = xyz_cam[..., 2:3]
+    in_front = depth[..., 0] > DEPTH_EPS
+    uvw = xyz_cam @ pix_T_cam.transpose(-1, -2)
+    uv_pix = uvw[..., :2] / depth.clamp(min=DEPTH_EPS)
+    return uv_pix, in_front
+
+
+def pixels_to_grid(uv_pix: Tensor, image_hw: tuple[int, int]) -> Tensor:
+    """Pixel coordinates -> ``grid_sample`` coordinates in [-1, 1] (``align_corners=False``).
+
+    With pixel centres at integers, the image spans [-0.5, W - 0.5] in u, mapped to [-1, 1].
+    """
+    h, w = image_hw
+    scale = uv_pix.new_tensor([2.0 / w, 2.0 / h])
+    return (uv_pix + 0.5) * scale - 1.0
+
+
+def project_to_grid(
+    pix_T_cam: Tensor, cam_T_world: Tensor, xyz_world: Tensor, image_hw: tuple[int, int]
+) -> tuple[Tensor, Tensor]:
+    """Project world points into images as ``grid_sample`` coordinates, with a visibility mask.
+
+    Args:
+        pix_T_cam: (B, S, 3, 3) intrinsics per sample and camera, for images of ``image_hw``.
+        cam_T_world: (B, S, 4, 4) extrinsics per sample and camera.
+        xyz_world: (N, 3) points shared by the batch.
+        image_hw: (height, width) the intrinsics refer to.
+    Returns:
+        grid: (B, S, N, 2) coordinates in [-1, 1] where visible.
+        visible: (B, S, N) bool: in front of the camera and inside the image.
+    """
+    xyz_cam = apply_transform(cam_T_world, xyz_world)  # B, S, N, 3
+    uv_pix, in_front = project_to_pixels(pix_T_cam, xyz_cam)
+    grid = pixels_to_grid(uv_pix, image_hw)
+    inside = (grid.abs() <= 1.0).all(dim=-1)
+    return grid, in_front & inside
+
+
+def camera_centers_world(cam_T_world: Tensor) -> Tensor:
+    """(..., 4, 4) extrinsics -> (..., 3) camera optical centres in the world frame (-R^T t)."""
+    R = cam_T_world[..., :3, :3]
+    t = cam_T_world[..., :3, 3:]
+    return -(R.transpose(-1, -2) @ t)[..., 0]
+
+
+def scale_intrinsics(pix_T_cam: Tensor, from_hw: tuple[int, int], to_hw: tuple[int, int]) -> Tensor:
+    """Intrinsics after resizing a whole image from ``from_hw`` to ``to_hw`` (pixel centres at integers)."""
+    sy, sx = to_hw[0] / from_hw[0], to_hw[1] / from_hw[1]
+    K = pix_T_cam.clone()
+    K[..., 0, :] *= sx
+    K[..., 1, :] *= sy
+    K[..., 0, 2] += 0.5 * sx - 0.5
+    K[..., 1, 2] += 0.5 * sy - 0.5
+    return K
+
+
+def look_at(eye_world: Tensor, target_world: Tensor, up_world: Tensor | None = None) -> Tensor:
+    """``cam_T_world`` (4, 4) of an OpenCV camera at ``eye_world`` looking at ``target_world``.
+
+    The image's v axis (down) is the projection of ``-up_world`` (default world z), so the world's up
+    points up in the image. ``eye``/``target``: (3,) tensors in the world frame.
+    """
+    up = up_world if up_world is not None else eye_world.new_tensor([0.0, 0.0, 1.0])
+    z = target_world - eye_world
+    z = z / z.norm()
+    x = torch.linalg.cross(z, up)
+    x = x / x.norm()
+    y = torch.linalg.cross(z, x)
+    cam_T_world = torch.eye(4, dtype=eye_world.dtype)
+    cam_T_world[:3, :3] = torch.stack([x, y, z])  # rows: camera axes in world coordinates
+    cam_T_world[:3, 3] = -cam_T_world[:3, :3] @ eye_world
+    return cam_T_world

@@ -1,0 +1,280 @@
+"""OmniD policy: shared ResNet -> Omni-Feature Generator -> LeRobot's conditional 1D UNet diffusion head.
+
+Shape legend: B batch, T observation steps, S cameras, H W image, Da action dim, Ds state dim.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import torch
+import torch.nn.functional as F
+from diffusers.schedulers.scheduling_ddim import DDIMScheduler
+from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
+from lerobot.policies.diffusion.modeling_diffusion import DiffusionConditionalUnet1d, SpatialSoftmax
+from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.policies.utils import get_output_shape, populate_queues
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+from torch import Tensor, nn
+
+from lerobot_omnid.backbone import ResNetFeatures
+from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.geometry import scale_intrinsics
+from lerobot_omnid.omni_feature_generator import OFGOutput, OmniFeatureGenerator
+
+
+class OmniDPolicy(PreTrainedPolicy):
+    """OmniD (Mao et al., 2025): multi-view BEV features by deformable attention + diffusion action head.
+
+    The cameras used are ``config.image_features``; each needs an entry in ``config.camera_calibration``.
+    The model itself does not depend on which or how many cameras there are.
+    """
+
+    config_class = OmniDConfig
+    name = "omnid"
+
+    def __init__(self, config: OmniDConfig, **kwargs) -> None:
+        """``kwargs`` (``dataset_stats``, ``dataset_meta`` from ``make_policy``) are not needed: normalisation
+        lives in the processors and calibration in the config."""
+        super().__init__(config)
+        config.validate_features()
+        self.config = config
+        self.model = OmniDModel(config)
+        self.reset()
+
+    def get_optim_params(self) -> dict:
+        return self.model.parameters()
+
+    def reset(self) -> None:
+        """Clear observation and action queues. Called on ``env.reset()``."""
+        self._queues = {
+            OBS_STATE: deque(maxlen=self.config.n_obs_steps),
+            OBS_IMAGES: deque(maxlen=self.config.n_obs_steps),
+            ACTION: deque(maxlen=self.config.n_action_steps),
+        }
+
+    @property
+    def camera_keys(self) -> list[str]:
+        return list(self.config.image_features)
+
+    def camera_matrices(
+        self, batch_size: int, image_hw: tuple[int, int], device: torch.device
+    ) -> tuple[Tensor, Tensor]:
+        """Calibration of ``camera_keys`` from the config, for images of ``image_hw``, broadcast to the batch.
+
+        Returns:
+            pix_T_cam (B, S, 3, 3) and cam_T_world (B, S, 4, 4).
+        """
+        Ks, Ts = [], []
+        for key in self.camera_keys:
+            calib = self.config.calibration(key)
+            Ks.append(
+                scale_intrinsics(torch.tensor(calib.K, dtype=torch.float32), calib.image_size, image_hw)
+            )
+            Ts.append(torch.tensor(calib.T_cam_world, dtype=torch.float32))
+        pix_T_cam = torch.stack(Ks).to(device).expand(batch_size, -1, -1, -1)
+        cam_T_world = torch.stack(Ts).to(device).expand(batch_size, -1, -1, -1)
+        return pix_T_cam, cam_T_world
+
+    def _stack_inputs(self, batch: dict[str, Tensor], time_dim: bool) -> dict[str, Tensor]:
+        """Validate the inputs and stack the cameras: images (B, [T,] S, 3, H, W), state (B, [T,] Ds)."""
+        image_ndim = 5 if time_dim else 4
+        if OBS_STATE not in batch:
+            raise KeyError(f"`{OBS_STATE}` is missing from the batch (keys: {sorted(batch)})")
+        state = batch[OBS_STATE]
+        if state.ndim != image_ndim - 2:
+            raise ValueError(f"`{OBS_STATE}`: expected {image_ndim - 2} dims, got shape {tuple(state.shape)}")
+        if not torch.isfinite(state).all():
+            raise ValueError(f"`{OBS_STATE}` contains NaN or infinite values")
+        images = []
+        for key in self.camera_keys:
+            if key not in batch:
+                raise KeyError(f"`{key}` is missing from the batch (keys: {sorted(batch)})")
+            img = batch[key]
+            if time_dim and img.ndim == 4 and self.config.n_obs_steps == 1:
+                img = img.unsqueeze(1)
+            expected = "(B, T, 3, H, W)" if time_dim else "(B, 3, H, W)"
+            if img.ndim != image_ndim or img.shape[-3] != 3:
+                raise ValueError(f"`{key}`: expected images of shape {expected}, got {tuple(img.shape)}")
+            if not torch.isfinite(img).all():
+                raise ValueError(f"`{key}` contains NaN or infinite values")
+            images.append(img)
+        shapes = {tuple(img.shape[-2:]) for img in images}
+        if len(shapes) > 1:
+            raise ValueError(
+                f"All cameras must have one image size, got {sorted(shapes)} for {self.camera_keys}"
+            )
+        return {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
+
+    def _condition(self, stacked: dict[str, Tensor]) -> Tensor:
+        images = stacked[OBS_IMAGES]
+        pix_T_cam, cam_T_world = self.camera_matrices(
+            images.shape[0], tuple(images.shape[-2:]), images.device
+        )
+        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world)
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], noise: Tensor | None = None) -> Tensor:
+        """Predict ``n_action_steps`` actions (B, n_action_steps, Da) from the queued observations, or from
+        a batch with a time dimension when the queues are empty (offline use)."""
+        if len(self._queues[OBS_STATE]) > 0:
+            stacked = {k: torch.stack(list(self._queues[k]), dim=1) for k in (OBS_STATE, OBS_IMAGES)}
+        else:
+            stacked = self._stack_inputs(batch, time_dim=True)
+        return self.model.generate_actions(self._condition(stacked), noise=noise)
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], noise: Tensor | None = None) -> Tensor:
+        """One action (B, Da) for the current observation (images (B, 3, H, W), state (B, Ds)).
+
+        ``n_obs_steps`` observations are queued; a chunk of ``horizon`` actions is generated whenever
+        the action queue is empty and its ``n_action_steps`` first actions from the current step are
+        executed (same schedule as LeRobot's DiffusionPolicy).
+        """
+        stacked = self._stack_inputs(batch, time_dim=False)
+        self._queues = populate_queues(self._queues, stacked)
+        if len(self._queues[ACTION]) == 0:
+            actions = self.predict_action_chunk(batch, noise=noise)
+            self._queues[ACTION].extend(actions.transpose(0, 1))
+        return self._queues[ACTION].popleft()
+
+    def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, None]:
+        """Diffusion loss of a training batch: images (B, T, 3, H, W), state (B, T, Ds), action
+        (B, horizon, Da), action_is_pad (B, horizon)."""
+        stacked = self._stack_inputs(batch, time_dim=True)
+        if ACTION not in batch:
+            raise KeyError(f"`{ACTION}` is missing from the training batch (keys: {sorted(batch)})")
+        pad = batch.get("action_is_pad") if self.config.do_mask_loss_for_padding else None
+        return self.model.compute_loss(self._condition(stacked), batch[ACTION], pad), None
+
+
+class OmniDModel(nn.Module):
+    """The maths: observation encoder (backbone + OFG, or the "w/o OFG" pooling) and diffusion head."""
+
+    def __init__(self, config: OmniDConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.backbone = ResNetFeatures(
+            config.vision_backbone,
+            config.backbone_layer,
+            config.use_group_norm,
+            config.pretrained_backbone_weights,
+        )
+        if config.use_ofg:
+            self.ofg = OmniFeatureGenerator(config, self.backbone.out_channels)
+            image_cond_dim = self.ofg.out_dim
+        else:
+            # "w/o OFG" ablation: per-camera spatial-softmax keypoints, concatenated in camera order.
+            image_shape = next(iter(config.image_features.values())).shape
+            input_hw = config.resize_shape or tuple(image_shape[1:])
+            feature_shape = get_output_shape(self.backbone, (1, 3, *input_hw))[1:]
+            num_kp = config.spatial_softmax_num_keypoints
+            self.pool = nn.Sequential(
+                SpatialSoftmax(feature_shape, num_kp=num_kp),
+                nn.Flatten(),
+                nn.Linear(num_kp * 2, num_kp * 2),
+                nn.ReLU(),
+            )
+            image_cond_dim = num_kp * 2 * len(config.image_features)
+        state_dim = config.robot_state_feature.shape[0]
+        self.global_cond_dim = (image_cond_dim + state_dim) * config.n_obs_steps
+        self.unet = DiffusionConditionalUnet1d(config, global_cond_dim=self.global_cond_dim)
+        scheduler_cls = DDPMScheduler if config.noise_scheduler_type == "DDPM" else DDIMScheduler
+        self.noise_scheduler = scheduler_cls(
+            num_train_timesteps=config.num_train_timesteps,
+            beta_start=config.beta_start,
+            beta_end=config.beta_end,
+            beta_schedule=config.beta_schedule,
+            clip_sample=config.clip_sample,
+            clip_sample_range=config.clip_sample_range,
+            prediction_type=config.prediction_type,
+        )
+        self.num_inference_steps = config.num_inference_steps or config.num_train_timesteps
+
+    def encode_images(
+        self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
+    ) -> tuple[Tensor, OFGOutput | None]:
+        """Image condition of each observation step.
+
+        Args:
+            images: (B, T, S, 3, H, W) in [0, 1].
+            pix_T_cam: (B, S, 3, 3) intrinsics for (H, W) images, per sample and camera.
+            cam_T_world: (B, S, 4, 4) extrinsics per sample and camera.
+        Returns:
+            (B, T, image_cond_dim) and, with the OFG, its output for the (B*T) flattened steps.
+        """
+        B, T, S = images.shape[:3]
+        x = images.flatten(0, 2)  # B*T*S, 3, H, W
+        image_hw = tuple(x.shape[-2:])
+        if self.config.resize_shape is not None and tuple(self.config.resize_shape) != image_hw:
+            x = F.interpolate(
+                x, size=self.config.resize_shape, mode="bilinear", align_corners=False, antialias=True
+            )
+            pix_T_cam = scale_intrinsics(pix_T_cam, image_hw, tuple(self.config.resize_shape))
+            image_hw = tuple(self.config.resize_shape)
+        features = self.backbone(x)  # B*T*S, C, h, w
+        if not self.config.use_ofg:
+            return self.pool(features).view(B, T, -1), None
+        features = features.unflatten(0, (B * T, S))  # B*T, S, C, h, w
+        # The calibration is the same for every observation step: B, S, ... -> B*T, S, ...
+        out = self.ofg(
+            features,
+            pix_T_cam.repeat_interleave(T, dim=0),
+            cam_T_world.repeat_interleave(T, dim=0),
+            image_hw,
+        )
+        return out.condition.view(B, T, -1), out
+
+    def global_condition(
+        self, images: Tensor, state: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
+    ) -> Tensor:
+        """images (B, T, S, 3, H, W), state (B, T, Ds) -> (B, global_cond_dim)."""
+        image_cond, _ = self.encode_images(images, pix_T_cam, cam_T_world)
+        return torch.cat([image_cond, state], dim=-1).flatten(1)
+
+    def generate_actions(self, global_cond: Tensor, noise: Tensor | None = None) -> Tensor:
+        """Denoise a (B, horizon, Da) trajectory and keep ``n_action_steps`` from the current step."""
+        B = global_cond.shape[0]
+        sample = (
+            noise
+            if noise is not None
+            else torch.randn(
+                B,
+                self.config.horizon,
+                self.config.action_feature.shape[0],
+                device=global_cond.device,
+                dtype=global_cond.dtype,
+            )
+        )
+        self.noise_scheduler.set_timesteps(self.num_inference_steps)
+        for t in self.noise_scheduler.timesteps:
+            timestep = torch.full((B,), t, dtype=torch.long, device=sample.device)
+            model_output = self.unet(sample, timestep, global_cond=global_cond)
+            sample = self.noise_scheduler.step(model_output, t, sample).prev_sample
+        start = self.config.n_obs_steps - 1
+        return sample[:, start : start + self.config.n_action_steps]
+
+    def compute_loss(self, global_cond: Tensor, actions: Tensor, action_is_pad: Tensor | None) -> Tensor:
+        """Epsilon (or sample) MSE of the diffusion head.
+
+        Args:
+            global_cond: (B, global_cond_dim).
+            actions: (B, horizon, Da) normalised actions.
+            action_is_pad: (B, horizon) or None: mask of copy-padded actions to leave out of the loss.
+        """
+        if actions.shape[1] != self.config.horizon:
+            raise ValueError(
+                f"`action`: expected horizon {self.config.horizon}, got shape {tuple(actions.shape)}"
+            )
+        eps = torch.randn_like(actions)
+        timesteps = torch.randint(
+            0, self.noise_scheduler.config.num_train_timesteps, (actions.shape[0],), device=actions.device
+        )
+        noisy = self.noise_scheduler.add_noise(actions, eps, timesteps)
+        pred = self.unet(noisy, timesteps, global_cond=global_cond)
+        target = eps if self.config.prediction_type == "epsilon" else actions
+        loss = F.mse_loss(pred, target, reduction="none")
+        if action_is_pad is None:
+            return loss.mean()
+        valid = (~action_is_pad).unsqueeze(-1).to(loss.dtype)
+        return (loss * valid).sum() / (valid.sum() * loss.shape[-1]).clamp(min=1)
