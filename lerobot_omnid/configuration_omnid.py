@@ -7,6 +7,7 @@ from typing import Any
 
 from lerobot.configs import FeatureType, NormalizationMode, PreTrainedConfig
 from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
+from lerobot.utils.feature_utils import dataset_to_policy_features
 
 from lerobot_omnid.calibration import (
     CALIBRATION_INFO_KEY,
@@ -240,8 +241,6 @@ class OmniDConfig(PreTrainedConfig):
             if self.use_ofg or CALIBRATION_INFO_KEY in (dataset_features[k].get("info") or {})
         }
         if self.input_features:
-            from lerobot.datasets.feature_utils import dataset_to_policy_features
-
             policy_features = dataset_to_policy_features(dataset_features)
             dataset_images = {k: policy_features[k] for k in image_keys}
             others = {k: ft for k, ft in self.input_features.items() if ft.type is not FeatureType.VISUAL}

@@ -9,14 +9,14 @@ import torch
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from lerobot.configs.types import FeatureType, PolicyFeature  # noqa: E402
+from lerobot.configs.types import FeatureType, PolicyFeature
 
-from lerobot_omnid.configuration_omnid import OmniDConfig  # noqa: E402
-from lerobot_omnid.geometry import look_at  # noqa: E402
+from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.geometry import look_at
 
 # Camera eyes around a table whose workspace is centred at (0.5, 0, 0) in the robot base frame.
 SYNTHETIC_EYES = {
-    "cam_a": (0.5, 0.0, 1.2),
+    "cam_a": (0.1, 0.0, 1.1),
     "cam_b": (1.3, 0.0, 0.6),
     "cam_c": (0.5, 0.8, 0.6),
     "cam_d": (0.5, -0.8, 0.6),
@@ -68,7 +68,8 @@ def random_batch(config: OmniDConfig, batch_size: int = 2, generator: torch.Gene
     """A training batch matching ``config`` (images in [0, 1], normalised state and action)."""
     T = config.n_obs_steps
     batch = {
-        key: torch.rand(batch_size, T, *ft.shape, generator=generator) for key, ft in config.image_features.items()
+        key: torch.rand(batch_size, T, *ft.shape, generator=generator)
+        for key, ft in config.image_features.items()
     }
     batch["observation.state"] = torch.randn(batch_size, T, STATE_DIM, generator=generator)
     batch["action"] = torch.randn(batch_size, config.horizon, ACTION_DIM, generator=generator)

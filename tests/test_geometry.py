@@ -1,0 +1,126 @@
+"""Camera geometry: hand-computed pinhole values, masks, round trips."""
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from lerobot_omnid.geometry import (
+    FeatureVolume,
+    apply_transform,
+    camera_centers_world,
+    look_at,
+    pixels_to_grid,
+    project_to_grid,
+    project_to_pixels,
+    scale_intrinsics,
+)
+
+K = torch.tensor([[100.0, 0.0, 50.0], [0.0, 120.0, 40.0], [0.0, 0.0, 1.0]])
+
+
+def test_projection_matches_hand_computed_pinhole():
+    xyz_cam = torch.tensor([[0.1, 0.2, 2.0], [0.0, 0.0, 1.0], [-0.5, 0.25, 0.5]])
+    uv, in_front = project_to_pixels(K, xyz_cam)
+    expected = torch.tensor(
+        [[100 * 0.05 + 50, 120 * 0.1 + 40], [50.0, 40.0], [100 * -1 + 50, 120 * 0.5 + 40]]
+    )
+    assert torch.allclose(uv, expected)
+    assert in_front.all()
+
+
+def test_world_to_pixels_through_extrinsics():
+    # Camera 2 m above the origin looking straight down, image x along world -y... checked by hand:
+    cam_T_world = torch.tensor(
+        [[0.0, -1.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 2.0], [0.0, 0.0, 0.0, 1.0]]
+    )
+    xyz_world = torch.tensor([[0.2, 0.1, 0.0]])  # -> cam (-0.1, -0.2, 2.0)
+    xyz_cam = apply_transform(cam_T_world, xyz_world)
+    assert torch.allclose(xyz_cam, torch.tensor([[-0.1, -0.2, 2.0]]))
+    uv, _ = project_to_pixels(K, xyz_cam)
+    assert torch.allclose(uv, torch.tensor([[50 - 5.0, 40 - 12.0]]))
+
+
+def test_transform_round_trip():
+    cam_T_world = look_at(torch.tensor([1.0, 0.5, 0.8]), torch.tensor([0.4, 0.0, 0.0]))
+    xyz = torch.rand(7, 3)
+    back = apply_transform(torch.linalg.inv(cam_T_world), apply_transform(cam_T_world, xyz))
+    assert torch.allclose(back, xyz, atol=1e-6)
+
+
+def test_visibility_mask_behind_and_outside():
+    cam_T_world = torch.eye(4)[None, None]
+    pix_T_cam = K[None, None]
+    pts = torch.tensor(
+        [
+            [0.0, 0.0, 1.0],  # image point (50, 40): visible
+            [0.0, 0.0, -1.0],  # behind the camera
+            [5.0, 0.0, 1.0],  # u = 550: right of a 100-wide image
+            [0.0, -1.0, 1.0],  # v = -80: above the image
+            [0.0, 0.0, 0.0],  # on the camera centre
+        ]
+    )
+    grid, visible = project_to_grid(pix_T_cam, cam_T_world, pts, image_hw=(80, 100))
+    assert visible[0, 0].tolist() == [True, False, False, False, False]
+    assert torch.isfinite(grid).all()
+
+
+def test_pixels_to_grid_edges_and_centre():
+    uv = torch.tensor([[-0.5, -0.5], [99.5, 79.5], [49.5, 39.5]])
+    grid = pixels_to_grid(uv, (80, 100))
+    assert torch.allclose(grid, torch.tensor([[-1.0, -1.0], [1.0, 1.0], [0.0, 0.0]]))
+
+
+def test_grid_sample_reads_the_projected_pixel():
+    image = torch.zeros(1, 1, 80, 100)
+    image[0, 0, 33, 71] = 1.0  # v = 33, u = 71
+    grid = pixels_to_grid(torch.tensor([[71.0, 33.0]]), (80, 100)).view(1, 1, 1, 2)
+    assert F.grid_sample(image, grid, align_corners=False).item() == pytest.approx(1.0)
+
+
+def test_scale_intrinsics_matches_resized_pixel_centres():
+    xyz_cam = torch.tensor([[0.3, -0.2, 1.5]])
+    uv, _ = project_to_pixels(K, xyz_cam)
+    K_half = scale_intrinsics(K, (80, 100), (40, 25))
+    uv_half, _ = project_to_pixels(K_half, xyz_cam)
+    expected = (uv + 0.5) * torch.tensor([25 / 100, 40 / 80]) - 0.5
+    assert torch.allclose(uv_half, expected, atol=1e-5)
+
+
+def test_look_at_centres_target_and_round_trips_eye():
+    eye, target = torch.tensor([1.2, -0.4, 0.7]), torch.tensor([0.5, 0.1, 0.0])
+    cam_T_world = look_at(eye, target)
+    assert torch.allclose(camera_centers_world(cam_T_world), eye, atol=1e-6)
+    uv, in_front = project_to_pixels(K, apply_transform(cam_T_world, target[None]))
+    assert in_front.all() and torch.allclose(uv, K[:2, 2][None], atol=1e-4)
+    # World up appears up in the image: a point above the target has a smaller v.
+    uv_up, _ = project_to_pixels(K, apply_transform(cam_T_world, (target + torch.tensor([0, 0, 0.1]))[None]))
+    assert uv_up[0, 1] < uv[0, 1]
+
+
+@pytest.mark.parametrize("pillar_axis", ["x", "y", "z"])
+def test_feature_volume_anchors(pillar_axis):
+    volume = FeatureVolume(
+        bounds=((0.0, 1.0), (-0.5, 0.5), (0.0, 0.4)), shape=(4, 2, 8), pillar_axis=pillar_axis
+    )
+    anchors = volume.anchors_world()
+    p = "xyz".index(pillar_axis)
+    assert anchors.shape == (volume.num_queries, volume.shape[p], 3)
+    assert volume.num_queries * volume.num_anchors == 4 * 2 * 8
+    # Anchors of one pillar differ only along the pillar axis, by one cell each.
+    steps = anchors[0, 1:] - anchors[0, :-1]
+    cell = (volume.bounds[p][1] - volume.bounds[p][0]) / volume.shape[p]
+    expected = torch.zeros(3)
+    expected[p] = cell
+    assert torch.allclose(steps, expected.expand_as(steps), atol=1e-6)
+    lo = torch.tensor([b[0] for b in volume.bounds])
+    hi = torch.tensor([b[1] for b in volume.bounds])
+    assert ((anchors > lo) & (anchors < hi)).all()
+    coords = volume.plane_coords_normalized()
+    assert coords.shape == (volume.num_queries, 3) and coords.abs().max() <= 1
+
+
+def test_feature_volume_rejects_bad_input():
+    with pytest.raises(ValueError, match="pillar_axis"):
+        FeatureVolume(bounds=((0, 1), (0, 1), (0, 1)), shape=(2, 2, 2), pillar_axis="w")
+    with pytest.raises(ValueError, match="min < max"):
+        FeatureVolume(bounds=((1, 0), (0, 1), (0, 1)), shape=(2, 2, 2))

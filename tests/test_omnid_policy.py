@@ -1,0 +1,235 @@
+"""OmniD policy: per-sample calibration, camera subsets, gradients, save/load, bad input."""
+
+import pytest
+import torch
+from conftest import ACTION_DIM, STATE_DIM, random_batch, synthetic_calibration, tiny_config
+from lerobot.configs.types import FeatureType, PolicyFeature
+
+from lerobot_omnid.calibration import CalibrationError
+from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.geometry import look_at
+from lerobot_omnid.modeling_omnid import OmniDPolicy
+
+SIZE = 64
+
+
+def observation(config: OmniDConfig, batch_size: int = 1) -> dict:
+    obs = {key: torch.rand(batch_size, *ft.shape) for key, ft in config.image_features.items()}
+    obs["observation.state"] = torch.randn(batch_size, STATE_DIM)
+    return obs
+
+
+def fixed_noise(config: OmniDConfig, batch_size: int = 1) -> torch.Tensor:
+    return torch.randn(batch_size, config.horizon, ACTION_DIM, generator=torch.Generator().manual_seed(1))
+
+
+def use_cameras(policy: OmniDPolicy, cams: tuple[str, ...]) -> None:
+    """Point an existing policy at other cameras: features and calibration only, weights untouched."""
+    keys = [f"observation.images.{c}" for c in cams]
+    others = {k: ft for k, ft in policy.config.input_features.items() if ft.type is not FeatureType.VISUAL}
+    policy.config.input_features = {
+        **others,
+        **{k: PolicyFeature(FeatureType.VISUAL, (3, SIZE, SIZE)) for k in keys},
+    }
+    policy.config.camera_calibration = {
+        k: synthetic_calibration(c, SIZE) for k, c in zip(keys, cams, strict=True)
+    }
+
+
+def ofg_inputs(policy: OmniDPolicy, batch_size: int):
+    pix_T_cam, cam_T_world = policy.camera_matrices(batch_size, (SIZE, SIZE), torch.device("cpu"))
+    return pix_T_cam.clone(), cam_T_world.clone()
+
+
+def test_config_validation_messages():
+    with pytest.raises(ValueError, match="`vision_backbone` must be one of"):
+        tiny_config(vision_backbone="vgg16")
+    with pytest.raises(ValueError, match="divisible by `num_heads`"):
+        tiny_config(d_model=30, num_heads=4)
+    with pytest.raises(ValueError, match="multiple of 2\\*\\*len\\(down_dims\\)"):
+        tiny_config(horizon=10)
+    with pytest.raises(ValueError, match="`pillar_axis` must be one of"):
+        tiny_config(pillar_axis="w")
+    with pytest.raises(ValueError, match="volume_bounds"):
+        tiny_config(volume_bounds=((1.0, 0.0), (0.0, 1.0), (0.0, 1.0)))
+
+
+def test_each_sample_uses_its_own_calibration():
+    policy = OmniDPolicy(tiny_config()).eval()
+    images = torch.rand(1, 1, 4, 3, SIZE, SIZE).expand(2, -1, -1, -1, -1, -1)
+    pix_T_cam, cam_T_world = ofg_inputs(policy, 2)
+    # Sample 1: every camera moved (looking at another point of the table).
+    for s, cam in enumerate(("cam_b", "cam_c", "cam_d", "cam_e")):
+        moved = synthetic_calibration(cam, SIZE, target=(0.6, 0.15, 0.05))
+        cam_T_world[1, s] = torch.tensor(moved["T_cam_world"])
+    both, _ = policy.model.encode_images(images, pix_T_cam, cam_T_world)
+    alone = [
+        policy.model.encode_images(images[i : i + 1], pix_T_cam[i : i + 1], cam_T_world[i : i + 1])[0]
+        for i in range(2)
+    ]
+    assert torch.allclose(both[0], alone[0][0], atol=1e-5)
+    assert torch.allclose(both[1], alone[1][0], atol=1e-5)
+    assert not torch.allclose(both[0], both[1], atol=1e-3)
+
+
+def test_camera_that_sees_nothing_gets_no_weight():
+    policy = OmniDPolicy(tiny_config()).eval()
+    images = torch.rand(1, 1, 4, 3, SIZE, SIZE)
+    pix_T_cam, cam_T_world = ofg_inputs(policy, 1)
+    away = cam_T_world.clone()
+    away[0, 0] = look_at(torch.tensor([1.3, 0.0, 0.6]), torch.tensor([3.0, 0.0, 0.6]))  # cam_b looks away
+    _, out = policy.model.encode_images(images, pix_T_cam, away)
+    assert out.geometry.anchor_visible[0, 0].sum() == 0
+    assert out.attention_weights[0, 0].abs().sum() == 0
+    # Weights of every query seen by some camera sum to one over cameras x anchors x points.
+    totals = out.attention_weights.sum(dim=(1, 4, 5))  # B, Q, heads
+    seen = out.geometry.anchor_visible.any(dim=(1, 3))  # B, Q
+    assert torch.allclose(totals[seen], torch.ones_like(totals[seen]), atol=1e-5)
+    # Dropping the blind camera changes nothing.
+    without, _ = policy.model.encode_images(images[:, :, 1:], pix_T_cam[:, 1:], away[:, 1:])
+    with_blind, _ = policy.model.encode_images(images, pix_T_cam, away)
+    assert torch.allclose(with_blind, without, atol=1e-5)
+
+
+@pytest.mark.parametrize("cams", [("cam_a",), ("cam_b", "cam_c"), ("cam_a", "cam_c", "cam_e")])
+def test_model_built_for_bcde_runs_on_other_cameras(cams):
+    policy = OmniDPolicy(tiny_config()).eval()
+    state_before = {k: v.clone() for k, v in policy.state_dict().items()}
+    use_cameras(policy, cams)
+    action = policy.select_action(observation(policy.config), noise=fixed_noise(policy.config))
+    assert action.shape == (1, ACTION_DIM) and torch.isfinite(action).all()
+    assert all(torch.equal(state_before[k], v) for k, v in policy.state_dict().items())
+
+
+def test_gradients_reach_queries_offsets_weights_backbone():
+    policy = OmniDPolicy(tiny_config()).train()
+    optimizer = torch.optim.SGD(policy.parameters(), lr=1e-2)
+    # Offsets and attention logits start from zero weights (samples on the projections, uniform
+    # weights), so the camera embedding only gets gradient from the second step on.
+    for _ in range(2):
+        optimizer.zero_grad()
+        loss, _ = policy.forward(random_batch(policy.config))
+        loss.backward()
+        optimizer.step()
+    layer = policy.model.ofg.layers[0].cross_attn
+    for name, param in {
+        "query_embed": policy.model.ofg.query_embed,
+        "sampling_offsets": layer.sampling_offsets.weight,
+        "attention_logits": layer.attention_logits.weight,
+        "camera_embed": layer.camera_embed[0].weight,
+        "backbone": policy.model.backbone.body[0].weight,
+        "unet": next(policy.model.unet.parameters()),
+    }.items():
+        assert param.grad is not None and param.grad.abs().sum() > 0, name
+
+
+def test_training_reduces_loss_on_a_fixed_batch():
+    policy = OmniDPolicy(tiny_config()).train()
+    batch = random_batch(policy.config, batch_size=4, generator=torch.Generator().manual_seed(0))
+    optimizer = torch.optim.AdamW(policy.parameters(), lr=1e-3)
+    losses = []
+    for _ in range(15):
+        torch.manual_seed(0)  # same noise and timesteps each step: a pure fitting problem
+        loss, _ = policy.forward(batch)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    assert losses[-1] < 0.5 * losses[0]
+
+
+def test_save_and_load_give_identical_actions(tmp_path):
+    policy = OmniDPolicy(tiny_config()).eval()
+    obs = observation(policy.config)
+    expected = policy.select_action(obs, noise=fixed_noise(policy.config))
+    policy.save_pretrained(tmp_path)
+    loaded = OmniDPolicy.from_pretrained(tmp_path).eval()
+    assert loaded.config.camera_calibration == policy.config.camera_calibration
+    assert torch.equal(loaded.select_action(obs, noise=fixed_noise(policy.config)), expected)
+
+
+def test_without_ofg_ablation_trains_and_acts():
+    policy = OmniDPolicy(tiny_config(use_ofg=False))
+    assert not hasattr(policy.model, "ofg")
+    loss, _ = policy.forward(random_batch(policy.config))
+    loss.backward()
+    policy.eval()
+    assert policy.select_action(observation(policy.config)).shape == (1, ACTION_DIM)
+
+
+def test_resize_rescales_intrinsics():
+    policy = OmniDPolicy(tiny_config(resize_shape=(32, 32))).eval()
+    images = torch.rand(1, 1, 4, 3, SIZE, SIZE)
+    pix_T_cam, cam_T_world = ofg_inputs(policy, 1)
+    _, out_resized = policy.model.encode_images(images, pix_T_cam, cam_T_world)
+    reference = OmniDPolicy(tiny_config()).eval()
+    _, out_full = reference.model.encode_images(images, pix_T_cam, cam_T_world)
+    # Grid coordinates are resolution independent: the same anchors land at the same relative place.
+    assert torch.allclose(out_resized.geometry.anchor_grid, out_full.geometry.anchor_grid, atol=1e-5)
+
+
+def test_missing_calibration_is_a_clear_error():
+    with pytest.raises(CalibrationError, match=r"observation\.images\.cam_b: no camera calibration"):
+        OmniDPolicy(tiny_config(camera_calibration={}))
+
+
+def test_image_key_without_calibration_is_a_clear_error():
+    policy = OmniDPolicy(tiny_config()).eval()
+    use_cameras(policy, ("cam_b",))
+    policy.config.input_features["observation.images.extra"] = PolicyFeature(
+        FeatureType.VISUAL, (3, SIZE, SIZE)
+    )
+    obs = observation(policy.config)
+    with pytest.raises(CalibrationError, match=r"observation\.images\.extra: no camera calibration"):
+        policy.select_action(obs)
+
+
+@pytest.mark.parametrize("key", ["observation.images.cam_c", "observation.state"])
+def test_nan_inputs_are_rejected(key):
+    policy = OmniDPolicy(tiny_config()).eval()
+    obs = observation(policy.config)
+    obs[key] = obs[key].clone()
+    obs[key].view(-1)[3] = float("nan")
+    with pytest.raises(ValueError, match=f"`{key}` contains NaN"):
+        policy.select_action(obs)
+    batch = random_batch(policy.config)
+    batch[key].view(-1)[0] = float("nan")
+    with pytest.raises(ValueError, match=f"`{key}` contains NaN"):
+        policy.forward(batch)
+
+
+def test_wrong_image_rank_is_rejected():
+    policy = OmniDPolicy(tiny_config()).eval()
+    obs = observation(policy.config)
+    obs["observation.images.cam_d"] = obs["observation.images.cam_d"][0]  # (3, H, W)
+    with pytest.raises(
+        ValueError, match=r"`observation\.images\.cam_d`: expected images of shape \(B, 3, H, W\)"
+    ):
+        policy.select_action(obs)
+    obs = observation(policy.config)
+    with pytest.raises(KeyError, match=r"observation\.images\.cam_b"):
+        policy.select_action({k: v for k, v in obs.items() if k != "observation.images.cam_b"})
+
+
+def test_dataset_calibration_flows_into_config():
+    config = tiny_config(cams=("cam_b",), camera_calibration={}, cameras=["cam_c", "cam_d"])
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (STATE_DIM,), "names": None},
+        "action": {"dtype": "float32", "shape": (ACTION_DIM,), "names": None},
+    }
+    for cam in ("cam_b", "cam_c", "cam_d"):
+        features[f"observation.images.{cam}"] = {
+            "dtype": "video",
+            "shape": (SIZE, SIZE, 3),
+            "names": ["height", "width", "channels"],
+            "info": {"video.fps": 10, "calibration": synthetic_calibration(cam, SIZE)},
+        }
+    config.set_dataset_feature_metadata(features)
+    assert list(config.image_features) == ["observation.images.cam_c", "observation.images.cam_d"]
+    assert set(config.camera_calibration) == {"observation.images.cam_c", "observation.images.cam_d"}
+    del features["observation.images.cam_d"]["info"]["calibration"]
+    with pytest.raises(CalibrationError, match=r"observation\.images\.cam_d: no camera calibration"):
+        config.set_dataset_feature_metadata(features)
+    config.cameras = ["cam_z"]
+    with pytest.raises(ValueError, match="`cameras`"):
+        config.set_dataset_feature_metadata(features)
