@@ -77,6 +77,49 @@ def random_batch(config: OmniDConfig, batch_size: int = 2, generator: torch.Gene
     return batch
 
 
+def make_tiny_dataset(
+    root,
+    cams=("cam_a", "cam_b", "cam_c", "cam_d", "cam_e"),
+    size: int = 64,
+    episodes: int = 2,
+    frames: int = 20,
+):
+    """A small LeRobotDataset written by ``LeRobotDataset.create``: random video cameras with calibration
+    in their feature info, random state and action."""
+    import numpy as np
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    features = {
+        "observation.state": {
+            "dtype": "float32",
+            "shape": (STATE_DIM,),
+            "names": [f"s{i}" for i in range(STATE_DIM)],
+        },
+        "action": {"dtype": "float32", "shape": (ACTION_DIM,), "names": [f"a{i}" for i in range(ACTION_DIM)]},
+    }
+    for cam in cams:
+        features[f"observation.images.{cam}"] = {
+            "dtype": "video",
+            "shape": (size, size, 3),
+            "names": ["height", "width", "channels"],
+            "info": {"calibration": synthetic_calibration(cam, size)},
+        }
+    dataset = LeRobotDataset.create("local/tiny", fps=10, features=features, root=root, use_videos=True)
+    rng = np.random.default_rng(0)
+    for _ in range(episodes):
+        for _ in range(frames):
+            frame = {
+                f"observation.images.{c}": rng.integers(0, 256, (size, size, 3), dtype=np.uint8) for c in cams
+            }
+            frame["observation.state"] = rng.standard_normal(STATE_DIM).astype(np.float32)
+            frame["action"] = rng.standard_normal(ACTION_DIM).astype(np.float32)
+            frame["task"] = "put the apple in the bowl"
+            dataset.add_frame(frame)
+        dataset.save_episode()
+    dataset.finalize()
+    return dataset
+
+
 @pytest.fixture(autouse=True)
 def _seed() -> None:
     torch.manual_seed(0)
