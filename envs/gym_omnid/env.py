@@ -1,0 +1,300 @@
+"""OmniDEnv: one gymnasium env for every task, camera subset, layout, background and image size."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from gym_omnid.calibration import mujoco_camera_calibration
+from gym_omnid.constants import (
+    ACTION_DIM,
+    ACTION_NAMES,
+    ACTION_POS_HIGH,
+    ACTION_POS_LOW,
+    ARM_JOINT_RANGES,
+    ARM_JOINTS,
+    BACKGROUNDS,
+    CAMERAS,
+    CONTROL_FPS,
+    DEFAULT_IMAGE_SIZE,
+    FINGER_TRAVEL,
+    HOME_JOINTS,
+    LAYOUTS,
+    MAX_IMAGE_SIDE,
+    N_SUBSTEPS,
+    RENDER_MOSAIC_COLUMNS,
+    SETTLE_STEPS,
+    STATE_DIM,
+    STATE_GRIPPER_RANGE,
+    STATE_JOINT_MARGIN,
+    STATE_NAMES,
+    STATE_POS_BOUND,
+    STATE_ROT_BOUND,
+    TABLE_TEXTURE_SIZE,
+    TASKS,
+)
+from gym_omnid.ik import DampedLeastSquaresIK
+from gym_omnid.robot import FINGER_JOINTS, TCP_SITE
+from gym_omnid.rotations import matrix_from_rot6d, rot6d_from_matrix
+from gym_omnid.scene import TABLE_TEXTURE, build_mjcf
+from gym_omnid.tasks import make_task
+from gym_omnid.textures import BACKGROUND_TEXTURES
+
+RENDER_MODES = ("rgb_array",)
+
+
+def _choice(field: str, value: Any, allowed: Sequence[Any]) -> Any:
+    """Return ``value`` if it is one of ``allowed``, else raise a ValueError naming ``field``."""
+    if value not in allowed:
+        raise ValueError(f"{field}: expected one of {list(allowed)}, got {value!r}")
+    return value
+
+
+def _image_size(value: int | Sequence[int]) -> tuple[int, int]:
+    """Normalise ``image_size`` (int or (height, width)) to (height, width), validated."""
+    size = (value, value) if isinstance(value, int | np.integer) else tuple(value)
+    if len(size) != 2 or not all(isinstance(s, int | np.integer) and 0 < s <= MAX_IMAGE_SIDE for s in size):
+        raise ValueError(
+            f"image_size: expected an int or (height, width) of ints in [1, {MAX_IMAGE_SIDE}], got {value!r}"
+        )
+    return int(size[0]), int(size[1])
+
+
+def _state_bounds() -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) of ``agent_pos`` in the ``STATE_NAMES`` layout."""
+    joints = np.array(ARM_JOINT_RANGES)
+    low = [
+        *[-STATE_POS_BOUND] * 3,
+        *[-STATE_ROT_BOUND] * 6,
+        STATE_GRIPPER_RANGE[0],
+        *(joints[:, 0] - STATE_JOINT_MARGIN),
+    ]
+    high = [
+        *[STATE_POS_BOUND] * 3,
+        *[STATE_ROT_BOUND] * 6,
+        STATE_GRIPPER_RANGE[1],
+        *(joints[:, 1] + STATE_JOINT_MARGIN),
+    ]
+    return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
+
+
+def _cameras(value: Sequence[str]) -> tuple[str, ...]:
+    cams = (value,) if isinstance(value, str) else tuple(value)
+    if not cams or len(set(cams)) != len(cams) or not set(cams) <= set(CAMERAS):
+        raise ValueError(
+            f"cameras: expected a non-empty subset of {list(CAMERAS)} without repeats, got {value!r}"
+        )
+    return cams
+
+
+class OmniDEnv(gym.Env):
+    """Multi-view tabletop manipulation with a 6-DoF arm, five fixed cameras and scripted experts.
+
+    Observation: ``{"pixels": {cam: (H, W, 3) uint8}, "agent_pos": (STATE_DIM,) float32}`` with the
+    state layout of ``state_names`` (TCP position m, TCP 6D orientation, gripper closure in [0, 1],
+    arm joint positions rad).
+    Action: ``(ACTION_DIM,) float32``, an absolute TCP target in the world frame: position (m), 6D
+    orientation (first two columns of ``world_R_tcp``), gripper command in [0, 1] (0 open, 1 closed);
+    applied through damped-least-squares IK to the joint-position actuators, then
+    ``1 / CONTROL_FPS`` s of physics.
+
+    Args:
+        task: one of ``TASKS``.
+        cameras: observed cameras, a non-empty subset of ``CAMERAS`` (order kept).
+        layout: ``"id"`` (key objects within +-5 cm of nominal) or ``"position_ood"`` (5-10 cm away).
+        background: table texture, ``"id"`` or ``"ood1"`` .. ``"ood4"``.
+        image_size: int (square) or (height, width), pixels.
+        render_mode: ``"rgb_array"`` (``render()`` returns a mosaic of the observed cameras) or None.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": CONTROL_FPS}
+
+    def __init__(
+        self,
+        task: str,
+        cameras: Sequence[str] = CAMERAS,
+        layout: str = "id",
+        background: str = "id",
+        image_size: int | tuple[int, int] = DEFAULT_IMAGE_SIZE,
+        render_mode: str | None = "rgb_array",
+    ) -> None:
+        self.task: str = _choice("task", task, TASKS)
+        self.cameras: tuple[str, ...] = _cameras(cameras)
+        self.layout: str = _choice("layout", layout, LAYOUTS)
+        self.background: str = _choice("background", background, BACKGROUNDS)
+        self.image_size: tuple[int, int] = _image_size(image_size)
+        self.render_mode = _choice("render_mode", render_mode, (*RENDER_MODES, None))
+        self.state_names: list[str] = list(STATE_NAMES)
+        self.action_names: list[str] = list(ACTION_NAMES)
+
+        self._task = make_task(task)
+        self.model = mujoco.MjModel.from_xml_string(build_mjcf(self._task, self.image_size))
+        self.data = mujoco.MjData(self.model)
+        self._task.bind(self.model)
+        self._ik = DampedLeastSquaresIK(self.model, TCP_SITE, ARM_JOINTS)
+        self._tcp = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, TCP_SITE)
+        self._arm_qpos = self._qpos_adr(ARM_JOINTS)
+        self._finger_qpos = self._qpos_adr(FINGER_JOINTS)
+        self._arm_ctrl = self._actuator_ids(ARM_JOINTS)
+        self._finger_ctrl = self._actuator_ids(FINGER_JOINTS)
+        self._q_target = np.array(HOME_JOINTS)
+        self._renderer: mujoco.Renderer | None = None
+        self._last_pixels: dict[str, np.ndarray] | None = None
+        self.set_background(self.background)
+
+        height, width = self.image_size
+        self.observation_space = spaces.Dict(
+            {
+                "pixels": spaces.Dict(
+                    {cam: spaces.Box(0, 255, (height, width, 3), dtype=np.uint8) for cam in self.cameras}
+                ),
+                "agent_pos": spaces.Box(*_state_bounds(), (STATE_DIM,), dtype=np.float32),
+            }
+        )
+        low = np.array([*ACTION_POS_LOW, *([-1.0] * 6), 0.0], dtype=np.float32)
+        high = np.array([*ACTION_POS_HIGH, *([1.0] * 6), 1.0], dtype=np.float32)
+        self.action_space = spaces.Box(low, high, (ACTION_DIM,), dtype=np.float32)
+        self._reset_robot()
+        mujoco.mj_forward(self.model, self.data)
+
+    # --- gymnasium API ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """Home the arm, sample a layout with ``self.np_random`` and let the objects settle."""
+        super().reset(seed=seed)
+        mujoco.mj_resetData(self.model, self.data)
+        self._reset_robot()
+        self._task.reset(self.data, self.np_random, self.layout)
+        mujoco.mj_forward(self.model, self.data)
+        mujoco.mj_step(self.model, self.data, nstep=SETTLE_STEPS)
+        return self._observation(), {"is_success": self._task.is_success(self.data)}
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        """Apply an absolute TCP target for ``1 / CONTROL_FPS`` s; reward 1 and terminate on success."""
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != (ACTION_DIM,):
+            raise ValueError(f"action: expected shape ({ACTION_DIM},), got {action.shape}")
+        action = np.clip(action, self.action_space.low, self.action_space.high)
+        world_R_target = matrix_from_rot6d(action[3:9])
+        self._q_target = self._ik.solve(action[:3], world_R_target, self._q_target)
+        self.data.ctrl[self._arm_ctrl] = self._q_target
+        self.data.ctrl[self._finger_ctrl] = (1.0 - action[9]) * FINGER_TRAVEL
+        mujoco.mj_step(self.model, self.data, nstep=N_SUBSTEPS)
+        success = self._task.is_success(self.data)
+        return self._observation(), float(success), success, False, {"is_success": success}
+
+    def render(self) -> np.ndarray | None:
+        """Mosaic (rows of ``RENDER_MOSAIC_COLUMNS``) of the observed cameras' latest images, uint8."""
+        if self.render_mode is None:
+            return None
+        if self._last_pixels is None:
+            self._last_pixels = self._render_cameras()
+        images = [self._last_pixels[cam] for cam in self.cameras]
+        height, width = self.image_size
+        columns = min(RENDER_MOSAIC_COLUMNS, len(images))
+        rows = -(-len(images) // columns)
+        mosaic = np.zeros((rows * height, columns * width, 3), dtype=np.uint8)
+        for i, image in enumerate(images):
+            row, col = divmod(i, columns)
+            mosaic[row * height : (row + 1) * height, col * width : (col + 1) * width] = image
+        return mosaic
+
+    def close(self) -> None:
+        """Free the renderer's GL context."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # --- public extras ---------------------------------------------------------------------------
+    @property
+    def task_description(self) -> str:
+        """Language instruction of the current episode (e.g. ``"put the apple in the bowl"``)."""
+        return self._task.description
+
+    def camera_calibration(self, cam: str) -> dict:
+        """OpenCV calibration of camera ``cam`` for this env's image size.
+
+        Returns ``{"K": (3, 3) float64, "T_cam_world": (4, 4) float64, "image_size": (height, width)}``
+        where ``uv = K @ (T_cam_world @ X)[:3]`` divided by its third component, pixel centres at
+        integer coordinates (see :mod:`gym_omnid.calibration`).
+        """
+        _choice("cam", cam, CAMERAS)
+        cam_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, cam)
+        return mujoco_camera_calibration(
+            float(self.model.cam_fovy[cam_id]),
+            self.data.cam_xpos[cam_id],
+            self.data.cam_xmat[cam_id],
+            self.image_size,
+        )
+
+    def object_positions(self) -> dict[str, np.ndarray]:
+        """World xyz (3,) of the task's key objects, metres."""
+        return self._task.object_positions(self.data)
+
+    def set_background(self, background: str) -> None:
+        """Swap the table texture in place (``tex_data`` + re-upload to the GL context), no recompiling."""
+        self.background = _choice("background", background, BACKGROUNDS)
+        tex_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_TEXTURE, TABLE_TEXTURE)
+        adr = self.model.tex_adr[tex_id]
+        n_bytes = TABLE_TEXTURE_SIZE * TABLE_TEXTURE_SIZE * 3
+        self.model.tex_data[adr : adr + n_bytes] = BACKGROUND_TEXTURES[background](
+            TABLE_TEXTURE_SIZE
+        ).reshape(-1)
+        if self._renderer is not None:
+            # The renderer owns the GL context holding the uploaded textures (private attribute).
+            if self._renderer._gl_context is not None:
+                self._renderer._gl_context.make_current()
+            mujoco.mjr_uploadTexture(self.model, self._renderer._mjr_context, tex_id)
+            self._last_pixels = None
+
+    @property
+    def task_spec(self):
+        """The :class:`gym_omnid.tasks.Task` instance (privileged access for experts and tests)."""
+        return self._task
+
+    def tcp_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Measured TCP position (3,) in metres and ``world_R_tcp`` (3, 3)."""
+        return self.data.site_xpos[self._tcp].copy(), self.data.site_xmat[self._tcp].reshape(3, 3).copy()
+
+    # --- internals -------------------------------------------------------------------------------
+    def _qpos_adr(self, joints: Sequence[str]) -> np.ndarray:
+        return np.array([self.model.jnt_qposadr[self.model.joint(name).id] for name in joints])
+
+    def _actuator_ids(self, names: Sequence[str]) -> np.ndarray:
+        return np.array([self.model.actuator(name).id for name in names])
+
+    def _reset_robot(self) -> None:
+        """Arm at home, gripper open, actuator targets matching."""
+        self._q_target = np.array(HOME_JOINTS)
+        self.data.qpos[self._arm_qpos] = self._q_target
+        self.data.ctrl[self._arm_ctrl] = self._q_target
+        self.data.qpos[self._finger_qpos] = FINGER_TRAVEL
+        self.data.ctrl[self._finger_ctrl] = FINGER_TRAVEL
+
+    def _render_cameras(self) -> dict[str, np.ndarray]:
+        if self._renderer is None:
+            height, width = self.image_size
+            self._renderer = mujoco.Renderer(self.model, height, width)
+        pixels = {}
+        for cam in self.cameras:
+            self._renderer.update_scene(self.data, camera=cam)
+            pixels[cam] = self._renderer.render()
+        return pixels
+
+    def _observation(self) -> dict:
+        self._last_pixels = self._render_cameras()
+        tcp_xyz, world_R_tcp = self.tcp_pose()
+        finger_gap = float(np.sum(self.data.qpos[self._finger_qpos]))
+        state = np.concatenate(
+            [
+                tcp_xyz,
+                rot6d_from_matrix(world_R_tcp),
+                [1.0 - finger_gap / (2 * FINGER_TRAVEL)],
+                self.data.qpos[self._arm_qpos],
+            ]
+        ).astype(np.float32)
+        return {"pixels": dict(self._last_pixels), "agent_pos": state}

@@ -1,0 +1,131 @@
+"""The MJCF scene built in code: floor, table with a swappable texture, the arm, five cameras, a task.
+
+Rendering cost is kept low on purpose: primitives only, no shadows, no multisampling, and an offscreen
+buffer exactly the size of the observation images.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+
+import numpy as np
+
+from gym_omnid.constants import (
+    CAMERA_FOVY,
+    CAMERAS,
+    PHYSICS_TIMESTEP,
+    RENDER_NUM_QUADS,
+    RENDER_NUM_SLICES,
+    RENDER_NUM_STACKS,
+    TABLE_HEIGHT,
+    TABLE_TEXTURE_SIZE,
+    TABLE_THICKNESS,
+    TABLE_X_RANGE,
+    TABLE_Y_HALF,
+)
+from gym_omnid.robot import arm_actuators, arm_defaults, arm_worldbody
+from gym_omnid.tasks.base import Task
+
+TABLE_TEXTURE = "table"
+TABLE_LEG_HALF = 0.03  # m: half side of a table leg
+# Camera placements: (position, point looked at), world frame, metres. B-E look at the workspace from
+# the front, both sides and over the robot's shoulder at similar heights; A is a steep top view.
+CAMERA_POSES = MappingProxyType(
+    {
+        "cam_a": ((0.30, -0.28, 1.18), (0.55, 0.0, 0.0)),
+        "cam_b": ((1.35, 0.0, 0.55), (0.52, 0.0, 0.05)),
+        "cam_c": ((0.55, 0.82, 0.52), (0.54, 0.0, 0.05)),
+        "cam_d": ((0.55, -0.82, 0.52), (0.54, 0.0, 0.05)),
+        "cam_e": ((-0.12, 0.62, 0.62), (0.55, 0.0, 0.05)),
+    }
+)
+
+
+def look_at_xyaxes(position: tuple[float, float, float], target: tuple[float, float, float]) -> np.ndarray:
+    """MuJoCo ``xyaxes`` (6,) of a camera at ``position`` looking at ``target`` with world z up.
+
+    MuJoCo cameras look along their -z axis, x right and y up.
+    """
+    z_axis = np.asarray(position, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    z_axis /= np.linalg.norm(z_axis)
+    x_axis = np.cross([0.0, 0.0, 1.0], z_axis)
+    x_axis /= np.linalg.norm(x_axis)
+    y_axis = np.cross(z_axis, x_axis)
+    return np.concatenate([x_axis, y_axis])
+
+
+def _cameras() -> str:
+    lines = []
+    for name in CAMERAS:
+        position, target = CAMERA_POSES[name]
+        xyaxes = " ".join(f"{v:.6f}" for v in look_at_xyaxes(position, target))
+        pos = " ".join(f"{v}" for v in position)
+        lines.append(
+            f'<camera name="{name}" mode="fixed" pos="{pos}" xyaxes="{xyaxes}" fovy="{CAMERA_FOVY}"/>'
+        )
+    return "\n    ".join(lines)
+
+
+def _table() -> str:
+    x_lo, x_hi = TABLE_X_RANGE
+    cx, half_x = (x_lo + x_hi) / 2, (x_hi - x_lo) / 2
+    leg_half_h = (TABLE_HEIGHT - TABLE_THICKNESS) / 2
+    legs = "\n    ".join(
+        f'<geom class="decor" type="box" size="{TABLE_LEG_HALF} {TABLE_LEG_HALF} {leg_half_h}" '
+        f'pos="{x:.3f} {y:.3f} {-TABLE_THICKNESS - leg_half_h}" rgba="0.3 0.25 0.2 1"/>'
+        for x in (x_lo + 0.06, x_hi - 0.06)
+        for y in (-TABLE_Y_HALF + 0.06, TABLE_Y_HALF - 0.06)
+    )
+    return f"""
+    <geom name="table_top" class="fixture" type="box" material="{TABLE_TEXTURE}"
+          size="{half_x} {TABLE_Y_HALF} {TABLE_THICKNESS / 2}" pos="{cx} 0 {-TABLE_THICKNESS / 2}"/>
+    {legs}"""
+
+
+def build_mjcf(task: Task, image_size: tuple[int, int]) -> str:
+    """Full MJCF of the scene for ``task`` with an offscreen buffer of ``image_size`` = (height, width)."""
+    height, width = image_size
+    return f"""
+<mujoco model="omnid_{task.name}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{PHYSICS_TIMESTEP}" integrator="implicitfast" cone="elliptic" impratio="10"/>
+  <visual>
+    <global offwidth="{width}" offheight="{height}"/>
+    <quality shadowsize="0" offsamples="0" numslices="{RENDER_NUM_SLICES}" numstacks="{RENDER_NUM_STACKS}"
+             numquads="{RENDER_NUM_QUADS}"/>
+    <headlight ambient="0.35 0.35 0.35" diffuse="0.35 0.35 0.35" specular="0.05 0.05 0.05"/>
+  </visual>
+  <default>
+    <default class="object">
+      <geom contype="1" conaffinity="1" friction="1.0 0.01 0.001"/>
+    </default>
+    <default class="fixture">
+      <geom contype="1" conaffinity="1" friction="0.8 0.01 0.001"/>
+    </default>
+    <default class="decor">
+      <geom contype="0" conaffinity="0" density="0"/>
+    </default>
+    {arm_defaults()}
+  </default>
+  <asset>
+    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.75 0.8 0.85" rgb2="0.35 0.38 0.42"
+             width="32" height="32"/>
+    <texture name="{TABLE_TEXTURE}" type="2d" builtin="flat" rgb1="0.77 0.63 0.46"
+             width="{TABLE_TEXTURE_SIZE}" height="{TABLE_TEXTURE_SIZE}"/>
+    <material name="{TABLE_TEXTURE}" texture="{TABLE_TEXTURE}" texrepeat="1 1"/>
+    <material name="floor" rgba="0.45 0.45 0.47 1"/>
+    {task.mjcf_assets()}
+  </asset>
+  <worldbody>
+    <light name="sun" directional="true" pos="0.5 0 3" dir="0.1 0.1 -1" castshadow="false"
+           diffuse="0.55 0.55 0.55" specular="0.1 0.1 0.1"/>
+    <geom name="floor" class="decor" type="plane" size="3 3 0.1" pos="0 0 {-TABLE_HEIGHT}" material="floor"/>
+    {_table()}
+    {_cameras()}
+    {arm_worldbody()}
+    {task.mjcf_bodies()}
+  </worldbody>
+  <actuator>
+    {arm_actuators()}
+  </actuator>
+</mujoco>"""

@@ -1,0 +1,141 @@
+"""Task interface and the shared layout sampler (ID square / position-OOD band, collision-free)."""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from gym_omnid.constants import ID_HALF_EXTENT, LAYOUT_MAX_TRIES, OOD_HALF_EXTENT, REST_SPEED
+from gym_omnid.robot import FINGER_GEOMS, HAND_GEOM
+
+
+@dataclass(frozen=True)
+class Placement:
+    """How one object's planar position is sampled.
+
+    Args:
+        name: object name (key of the sampled layout).
+        nominal_xy: (x, y) centre of its ID square, metres, world frame.
+        keepout: radius (m) of the disc it needs free, including room for the open fingers.
+        key: key objects follow the ``layout`` variant; the others always stay in their ID square.
+    """
+
+    name: str
+    nominal_xy: tuple[float, float]
+    keepout: float
+    key: bool = True
+
+
+def sample_offset(rng: np.random.Generator, layout: str) -> np.ndarray:
+    """(2,) planar offset (m): ``"id"`` uniform in the 10 cm square; ``"position_ood"`` uniform in the
+    band ``ID_HALF_EXTENT < |offset|_inf <= OOD_HALF_EXTENT`` around it."""
+    if layout == "id":
+        return rng.uniform(-ID_HALF_EXTENT, ID_HALF_EXTENT, size=2)
+    while True:
+        offset = rng.uniform(-OOD_HALF_EXTENT, OOD_HALF_EXTENT, size=2)
+        if np.max(np.abs(offset)) > ID_HALF_EXTENT:
+            return offset
+
+
+def sample_layout(
+    rng: np.random.Generator, placements: tuple[Placement, ...], layout: str
+) -> dict[str, np.ndarray]:
+    """Sample planar positions {name: (2,)} for all placements with pairwise-disjoint keep-out discs.
+
+    Rejection sampling with the episode's generator, so the result is a pure function of its state.
+    """
+    for _ in range(LAYOUT_MAX_TRIES):
+        xy = {
+            p.name: np.asarray(p.nominal_xy) + sample_offset(rng, layout if p.key else "id")
+            for p in placements
+        }
+        if all(
+            np.linalg.norm(xy[a.name] - xy[b.name]) >= a.keepout + b.keepout
+            for i, a in enumerate(placements)
+            for b in placements[i + 1 :]
+        ):
+            return xy
+    raise RuntimeError(f"no collision-free layout found in {LAYOUT_MAX_TRIES} tries (layout={layout!r})")
+
+
+def yaw_quat(yaw: float) -> np.ndarray:
+    """(4,) MuJoCo quaternion (w, x, y, z) of a rotation by ``yaw`` rad about world z."""
+    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+
+
+class Task(abc.ABC):
+    """One benchmark task: its objects (MJCF), reset sampler, success test and instruction.
+
+    A task instance belongs to one env and is bound to its compiled model by :meth:`bind`; per-episode
+    choices (e.g. the target colour) are stored on the instance by :meth:`reset`.
+    """
+
+    name: str
+
+    @abc.abstractmethod
+    def mjcf_assets(self) -> str:
+        """XML inside ``<asset>``: materials of the task's objects."""
+
+    @abc.abstractmethod
+    def mjcf_bodies(self) -> str:
+        """XML inside ``<worldbody>``: the task's objects and fixtures."""
+
+    def bind(self, model: mujoco.MjModel) -> None:
+        """Look up ids in the compiled model; subclasses extend this."""
+        self._model = model
+        self._finger_geoms = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in FINGER_GEOMS}
+        self._finger_geoms.add(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, HAND_GEOM))
+
+    @abc.abstractmethod
+    def reset(self, data: mujoco.MjData, rng: np.random.Generator, layout: str) -> None:
+        """Sample a layout and episode choices with ``rng`` and write them into ``data`` (qpos, mocap)."""
+
+    @property
+    @abc.abstractmethod
+    def description(self) -> str:
+        """Language instruction of the current episode."""
+
+    @abc.abstractmethod
+    def is_success(self, data: mujoco.MjData) -> bool:
+        """Whether the current state solves the task."""
+
+    @abc.abstractmethod
+    def object_positions(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
+        """World xyz (3,) of the task's key objects, metres."""
+
+    # --- helpers shared by tasks ---------------------------------------------------------------
+    def _body_id(self, name: str) -> int:
+        body_id = mujoco.mj_name2id(self._model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if body_id < 0:
+            raise KeyError(f"no body named {name!r}")
+        return body_id
+
+    def _free_qpos_adr(self, body: str) -> int:
+        """qpos address of the free joint of ``body``."""
+        return int(self._model.jnt_qposadr[self._model.body_jntadr[self._body_id(body)]])
+
+    def _set_free_pose(self, data: mujoco.MjData, body: str, xyz: np.ndarray, quat: np.ndarray) -> None:
+        adr = self._free_qpos_adr(body)
+        data.qpos[adr : adr + 3] = xyz
+        data.qpos[adr + 3 : adr + 7] = quat
+
+    def _set_mocap_xy(self, data: mujoco.MjData, body: str, xy: np.ndarray) -> None:
+        mocap_id = self._model.body_mocapid[self._body_id(body)]
+        data.mocap_pos[mocap_id] = (xy[0], xy[1], 0.0)
+
+    def _is_resting(self, data: mujoco.MjData, body: str) -> bool:
+        """Linear speed of a free body below ``REST_SPEED``."""
+        adr = int(self._model.jnt_dofadr[self._model.body_jntadr[self._body_id(body)]])
+        return bool(np.linalg.norm(data.qvel[adr : adr + 3]) < REST_SPEED)
+
+    def _touches_gripper(self, data: mujoco.MjData, body: str) -> bool:
+        """Whether any geom of ``body`` is in contact with the hand or a finger."""
+        geom_pairs = data.contact.geom[: data.ncon]  # ncon, 2
+        if len(geom_pairs) == 0:
+            return False
+        on_body = self._model.geom_bodyid[geom_pairs] == self._body_id(body)  # ncon, 2
+        on_gripper = np.isin(geom_pairs, list(self._finger_geoms))  # ncon, 2
+        return bool(np.any((on_body[:, 0] & on_gripper[:, 1]) | (on_body[:, 1] & on_gripper[:, 0])))
