@@ -120,7 +120,7 @@ class OmniDConfig(PreTrainedConfig):
     num_layers: int = 6
     num_points: int = 1
     ffn_dim: int = 256
-    dropout: float = 0.1
+    dropout: float = 0.0
     use_self_attention: bool = True
     compressed_channels: int = 1
     query_chunk_size: int = 512

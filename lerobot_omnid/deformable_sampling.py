@@ -20,10 +20,11 @@ from torch.utils.checkpoint import checkpoint
 
 
 def _sample_chunk(values: Tensor, grid: Tensor, weights: Tensor) -> Tensor:
-    """values (X, Dh, H, W), grid (X, Qc, N, 2), weights (X, Qc, N) -> (X, Qc, Dh); X = B*S*heads."""
+    """values (X, Dh, H, W), grid (X, Qc, N, 2), weights (X, Qc, N) -> (X, Dh, Qc); X = B*S*heads."""
     sampled = F.grid_sample(values, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
-    # X, Dh, Qc, N  x  X, Qc, N  ->  X, Qc, Dh
-    return torch.einsum("xdqn,xqn->xqd", sampled, weights)
+    # X, Dh, Qc, N  *  X, 1, Qc, N  -> (sum over N) X, Dh, Qc. An elementwise product and a reduction
+    # over the contiguous last axis: einsum would turn this into X*Qc tiny matrix products.
+    return (sampled * weights[:, None]).sum(dim=-1)
 
 
 def multi_camera_deformable_sampling(
@@ -72,7 +73,7 @@ def multi_camera_deformable_sampling(
             outputs.append(checkpoint(_sample_chunk, flat_values, grid_c, weights_c, use_reentrant=False))
         else:
             outputs.append(_sample_chunk(flat_values, grid_c, weights_c))
-    fused = torch.cat(outputs, dim=1)  # B*S*heads, Q, Dh
-    # B*S*heads, Q, Dh -> B, S, heads, Q, Dh -> (sum over cameras) B, Q, heads, Dh -> B, Q, heads*Dh
-    fused = fused.reshape(B, S, heads, Q, Dh).sum(dim=1)
-    return fused.permute(0, 2, 1, 3).reshape(B, Q, heads * Dh)
+    fused = torch.cat(outputs, dim=-1)  # B*S*heads, Dh, Q
+    # B*S*heads, Dh, Q -> B, S, heads, Dh, Q -> (sum over cameras) B, heads, Dh, Q -> B, Q, heads*Dh
+    fused = fused.reshape(B, S, heads, Dh, Q).sum(dim=1)
+    return fused.permute(0, 3, 1, 2).reshape(B, Q, heads * Dh)
