@@ -1,0 +1,127 @@
+"""``--env.type=omnid``: the env config's features, validation, CLI parsing and LeRobot's make_env."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import draccus
+import numpy as np
+import pytest
+from lerobot.configs import FeatureType
+from lerobot.envs.configs import EnvConfig
+from lerobot.envs.factory import make_env
+from lerobot.envs.utils import env_to_policy_features, preprocess_observation
+
+from lerobot_omnid.calibration import CameraCalibration
+from lerobot_omnid.env_config import OmniDEnvConfig
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+STATE_DIM = 16
+ACTION_DIM = 10
+
+
+def test_registered_and_defaults():
+    assert EnvConfig.get_choice_class("omnid") is OmniDEnvConfig
+    cfg = OmniDEnvConfig()
+    assert cfg.type == "omnid"
+    assert cfg.gym_id == "gym_omnid/select_apple"
+    assert cfg.cameras == ["cam_b", "cam_c", "cam_d", "cam_e"]
+    assert cfg.fps == 10
+    assert cfg.image_size == 128
+
+
+def test_features_for_camera_subset():
+    cfg = OmniDEnvConfig(task="select_chemistry_tube", cameras=["cam_a", "cam_c"], image_size=64,
+                         layout="position_ood", background="ood2", episode_length=30)
+    assert cfg.features_map == {
+        "action": "action",
+        "agent_pos": "observation.state",
+        "pixels/cam_a": "observation.images.cam_a",
+        "pixels/cam_c": "observation.images.cam_c",
+    }
+    assert {k: (f.type, f.shape) for k, f in cfg.features.items()} == {
+        "action": (FeatureType.ACTION, (ACTION_DIM,)),
+        "agent_pos": (FeatureType.STATE, (STATE_DIM,)),
+        "pixels/cam_a": (FeatureType.VISUAL, (64, 64, 3)),
+        "pixels/cam_c": (FeatureType.VISUAL, (64, 64, 3)),
+    }
+    policy_features = env_to_policy_features(cfg)
+    assert policy_features["observation.images.cam_c"].shape == (3, 64, 64)
+    assert policy_features["observation.state"].shape == (STATE_DIM,)
+    assert cfg.gym_id == "gym_omnid/select_chemistry_tube"
+    assert cfg.gym_kwargs == {
+        "cameras": ("cam_a", "cam_c"),
+        "layout": "position_ood",
+        "background": "ood2",
+        "image_size": 64,
+        "render_mode": "rgb_array",
+        "max_episode_steps": 30,
+    }
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field_name", "actual"),
+    [
+        ({"task": "make_tea"}, "task", "'make_tea'"),
+        ({"cameras": ["cam_b", "cam_z"]}, "cameras", "cam_z"),
+        ({"cameras": []}, "cameras", "[]"),
+        ({"cameras": ["cam_b", "cam_b"]}, "cameras", "['cam_b', 'cam_b']"),
+        ({"layout": "far"}, "layout", "'far'"),
+        ({"background": "ood5"}, "background", "'ood5'"),
+        ({"image_size": 0}, "image_size", "0"),
+        ({"episode_length": 0}, "episode_length", "0"),
+        ({"fps": 30}, "fps", "30"),
+        ({"render_mode": "human"}, "render_mode", "'human'"),
+    ],
+)
+def test_validation_names_field_and_value(kwargs, field_name, actual):
+    with pytest.raises(ValueError, match=field_name) as err:
+        OmniDEnvConfig(**kwargs)
+    assert actual in str(err.value)
+    assert "expected" in str(err.value)
+
+
+def test_cli_parsing_of_camera_list():
+    @dataclass
+    class Cli:
+        env: EnvConfig
+
+    cfg = draccus.parse(Cli, args=["--env.type=omnid", "--env.cameras=[cam_b,cam_c]", "--env.image_size=64"])
+    assert isinstance(cfg.env, OmniDEnvConfig)
+    assert cfg.env.cameras == ["cam_b", "cam_c"]
+    assert set(cfg.env.features) == {"action", "agent_pos", "pixels/cam_b", "pixels/cam_c"}
+
+
+def test_make_env_builds_and_steps():
+    cfg = OmniDEnvConfig(cameras=["cam_b", "cam_d"], image_size=64, episode_length=3)
+    envs = make_env(cfg, n_envs=1)
+    vec = envs["omnid"][0]
+    try:
+        obs, _ = vec.reset(seed=[0])
+        assert vec.call("_max_episode_steps")[0] == 3
+        assert isinstance(vec.call("task_description")[0], str)
+        assert vec.unwrapped.metadata["render_fps"] == 10
+        batch = preprocess_observation(obs)
+        assert batch["observation.images.cam_b"].shape == (1, 3, 64, 64)
+        assert batch["observation.state"].shape == (1, STATE_DIM)
+        # The state starts with the TCP pose and gripper in the action's layout: hold still.
+        action = obs["agent_pos"][:, :ACTION_DIM]
+        for _ in range(3):
+            obs, _, terminated, truncated, info = vec.step(action.astype(np.float32))
+            assert "is_success" in info or "final_info" in info
+        assert truncated[0] or terminated[0]
+        frame = vec.envs[0].render()
+        assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    finally:
+        vec.close()
+
+
+def test_camera_calibrations_are_valid_for_image_size():
+    cfg = OmniDEnvConfig(cameras=["cam_a", "cam_e"], image_size=64)
+    calibs = cfg.camera_calibrations()
+    assert sorted(calibs) == ["observation.images.cam_a", "observation.images.cam_e"]
+    for key, data in calibs.items():
+        calib = CameraCalibration.from_dict(data, camera=key)
+        assert calib.image_size == (64, 64)
