@@ -57,8 +57,15 @@ def _choice(field: str, value: Any, allowed: Sequence[Any]) -> Any:
 
 def _image_size(value: int | Sequence[int]) -> tuple[int, int]:
     """Normalise ``image_size`` (int or (height, width)) to (height, width), validated."""
-    size = (value, value) if isinstance(value, int | np.integer) else tuple(value)
-    if len(size) != 2 or not all(isinstance(s, int | np.integer) and 0 < s <= MAX_IMAGE_SIDE for s in size):
+    if isinstance(value, int | np.integer):
+        size = (value, value)
+    elif isinstance(value, Sequence) and not isinstance(value, str):
+        size = tuple(value)
+    else:
+        size = ()
+    if len(size) != 2 or not all(
+        isinstance(s, int | np.integer) and not isinstance(s, bool) and 0 < s <= MAX_IMAGE_SIDE for s in size
+    ):
         raise ValueError(
             f"image_size: expected an int or (height, width) of ints in [1, {MAX_IMAGE_SIDE}], got {value!r}"
         )
@@ -150,8 +157,9 @@ class OmniDEnv(gym.Env):
         height, width = self.image_size
         self.observation_space = spaces.Dict(
             {
+                # A sequence of pairs keeps the cameras in the requested order (a dict would be sorted).
                 "pixels": spaces.Dict(
-                    {cam: spaces.Box(0, 255, (height, width, 3), dtype=np.uint8) for cam in self.cameras}
+                    [(cam, spaces.Box(0, 255, (height, width, 3), dtype=np.uint8)) for cam in self.cameras]
                 ),
                 "agent_pos": spaces.Box(*_state_bounds(), (STATE_DIM,), dtype=np.float32),
             }

@@ -1,0 +1,237 @@
+"""OmniDEnv API: registration, check_env, spaces, determinism, variants and input validation."""
+
+from __future__ import annotations
+
+import gym_omnid
+import gymnasium as gym
+import numpy as np
+import pytest
+from gym_omnid.constants import FINGER_TRAVEL, ID_HALF_EXTENT, OOD_HALF_EXTENT
+from gym_omnid.env import OmniDEnv
+from gym_omnid.experts import waypoint_action
+from gym_omnid.tasks import select_apple, select_chemistry_tube
+from gym_omnid.tasks.base import sample_layout
+from gymnasium.utils.env_checker import check_env
+
+REGISTERED = sorted(env_id for env_id in gym.registry if env_id.startswith("gym_omnid/"))
+SETTLE_TOL = 3e-3  # m: how far a free object may move while settling at reset
+NOMINAL = {
+    "select_apple": {p.name: p for p in select_apple.PLACEMENTS},
+    "select_chemistry_tube": {p.name: p for p in select_chemistry_tube.PLACEMENTS},
+}
+
+
+def test_exports() -> None:
+    assert gym_omnid.CAMERAS == ("cam_a", "cam_b", "cam_c", "cam_d", "cam_e")
+    assert gym_omnid.TRAIN_CAMERAS == ("cam_b", "cam_c", "cam_d", "cam_e")
+    assert gym_omnid.LAYOUTS == ("id", "position_ood")
+    assert gym_omnid.BACKGROUNDS == ("id", "ood1", "ood2", "ood3", "ood4")
+    assert gym_omnid.CONTROL_FPS == 10
+    assert [f"gym_omnid/{task}" for task in sorted(gym_omnid.TASKS)] == REGISTERED
+
+
+@pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # absolute poses in metres
+@pytest.mark.parametrize("env_id", REGISTERED)
+def test_registration_and_check_env(env_id: str) -> None:
+    spec = gym.spec(env_id)
+    assert spec.entry_point == "gym_omnid.env:OmniDEnv"
+    assert spec.max_episode_steps == gym_omnid.MAX_EPISODE_STEPS
+    env = gym.make(env_id, image_size=64)
+    try:
+        assert isinstance(env.unwrapped, OmniDEnv)
+        assert env.metadata["render_fps"] == gym_omnid.CONTROL_FPS
+        check_env(env.unwrapped, skip_render_check=False)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("task", gym_omnid.TASKS)
+def test_reset_and_step_contract(make_env, task: str) -> None:
+    env = make_env(task)
+    obs, info = env.reset(seed=3)
+    assert info == {"is_success": False}
+    assert obs in env.observation_space
+    assert env.state_names == list(gym_omnid.STATE_NAMES) and len(env.state_names) == gym_omnid.STATE_DIM
+    assert env.action_names == list(gym_omnid.ACTION_NAMES) and len(env.action_names) == gym_omnid.ACTION_DIM
+    assert obs["agent_pos"].dtype == np.float32
+    assert obs["agent_pos"][9] == pytest.approx(0.0, abs=0.02)  # gripper open
+    assert isinstance(env.task_description, str) and env.task_description.startswith("put the ")
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert set(info) == {"is_success"} and isinstance(info["is_success"], bool)
+    assert reward == float(info["is_success"]) and terminated == info["is_success"] and not truncated
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.shape == (256, 384, 3)
+    for name, xyz in env.object_positions().items():
+        assert xyz.shape == (3,), name
+
+
+def test_tube_description_names_the_target(make_env) -> None:
+    env = make_env("select_chemistry_tube", cameras=["cam_a"], image_size=32)
+    colours = set()
+    for seed in range(12):
+        env.reset(seed=seed)
+        colour = env.task_spec.target
+        colours.add(colour)
+        assert env.task_description == f"put the {colour} tube in the holder"
+        np.testing.assert_allclose(
+            env.object_positions()["target_tube"], env.object_positions()[f"tube_{colour}"]
+        )
+    assert len(colours) >= 3
+
+
+@pytest.mark.parametrize("task", gym_omnid.TASKS)
+def test_same_seed_same_observations(make_env, task: str) -> None:
+    env_a, env_b = make_env(task), make_env(task)
+    action = waypoint_action(np.array([0.5, 0.1, 0.2]), 0.3, 0.5)
+    obs_a, _ = env_a.reset(seed=7)
+    obs_b, _ = env_b.reset(seed=7)
+    for _ in range(3):
+        obs_a, *_ = env_a.step(action)
+        obs_b, *_ = env_b.step(action)
+    for cam in gym_omnid.CAMERAS:
+        np.testing.assert_array_equal(obs_a["pixels"][cam], obs_b["pixels"][cam])
+    np.testing.assert_array_equal(obs_a["agent_pos"], obs_b["agent_pos"])
+    # Re-seeding the same env reproduces its first observation; another seed moves the objects.
+    first, _ = env_a.reset(seed=11)
+    again, _ = env_a.reset(seed=11)
+    np.testing.assert_array_equal(first["pixels"]["cam_b"], again["pixels"]["cam_b"])
+    positions = env_a.object_positions()
+    env_a.reset(seed=12)
+    assert any(np.linalg.norm(positions[k] - v) > 1e-3 for k, v in env_a.object_positions().items())
+
+
+def _offsets(env: OmniDEnv, task: str) -> dict[str, np.ndarray]:
+    """Planar offsets of the key objects from their nominal positions after reset."""
+    positions = env.object_positions()
+    return {
+        name: positions[name][:2] - np.asarray(p.nominal_xy) for name, p in NOMINAL[task].items() if p.key
+    }
+
+
+@pytest.mark.parametrize("task", gym_omnid.TASKS)
+def test_layout_variants(make_env, task: str) -> None:
+    """ID key objects stay in the 10 cm square; position-OOD ones in the band out to the 20 cm square."""
+    env_id = make_env(task, cameras=["cam_a"], image_size=32)
+    env_ood = make_env(task, cameras=["cam_a"], image_size=32, layout="position_ood")
+    for seed in range(15):
+        env_id.reset(seed=seed)
+        env_ood.reset(seed=seed)
+        for name, offset in _offsets(env_id, task).items():
+            assert np.abs(offset).max() <= ID_HALF_EXTENT + SETTLE_TOL, (seed, name)
+        for name, offset in _offsets(env_ood, task).items():
+            assert ID_HALF_EXTENT - SETTLE_TOL < np.abs(offset).max() <= OOD_HALF_EXTENT + SETTLE_TOL, (
+                seed,
+                name,
+            )
+
+
+@pytest.mark.parametrize("module", [select_apple, select_chemistry_tube])
+def test_layout_sampler_exact_bands_and_keepout(module) -> None:
+    rng = np.random.default_rng(0)
+    for layout in ("id", "position_ood"):
+        for _ in range(200):
+            xy = sample_layout(rng, module.PLACEMENTS, layout)
+            for i, a in enumerate(module.PLACEMENTS):
+                linf = np.abs(xy[a.name] - a.nominal_xy).max()
+                if layout == "id" or not a.key:
+                    assert linf <= ID_HALF_EXTENT
+                else:
+                    assert ID_HALF_EXTENT < linf <= OOD_HALF_EXTENT
+                for b in module.PLACEMENTS[i + 1 :]:
+                    assert np.linalg.norm(xy[a.name] - xy[b.name]) >= a.keepout + b.keepout
+
+
+@pytest.mark.parametrize("layout", gym_omnid.LAYOUTS)
+def test_reset_objects_do_not_touch_each_other(make_env, layout: str) -> None:
+    env = make_env("select_apple", cameras=["cam_a"], image_size=32, layout=layout)
+    fruit_and_bowl = {env.model.body(name).id for name in ("apple", "bowl", "orange", "lemon", "banana")}
+    for seed in range(10):
+        env.reset(seed=seed)
+        bodies = env.model.geom_bodyid[env.data.contact.geom[: env.data.ncon]]
+        for body_a, body_b in bodies:
+            assert not (body_a in fruit_and_bowl and body_b in fruit_and_bowl and body_a != body_b), seed
+        for name in ("apple", "orange"):
+            assert env.data.xpos[env.model.body(name).id][2] > 0.03  # resting on the table, not sunk
+
+
+def test_backgrounds_differ_in_pixels(make_env) -> None:
+    images = {}
+    for background in gym_omnid.BACKGROUNDS:
+        env = make_env("select_apple", cameras=["cam_a"], background=background)
+        obs, _ = env.reset(seed=0)
+        images[background] = obs["pixels"]["cam_a"].astype(np.int16)
+    for i, a in enumerate(gym_omnid.BACKGROUNDS):
+        for b in gym_omnid.BACKGROUNDS[i + 1 :]:
+            assert np.abs(images[a] - images[b]).mean() > 10, (a, b)
+
+
+def test_set_background_reuploads_without_recompiling(make_env) -> None:
+    env = make_env("select_apple", cameras=["cam_b"])
+    obs, _ = env.reset(seed=0)
+    model = env.model
+    env.set_background("ood4")
+    assert env.model is model and env.background == "ood4"
+    obs_ood, _ = env.reset(seed=0)
+    assert np.abs(obs_ood["pixels"]["cam_b"].astype(np.int16) - obs["pixels"]["cam_b"]).mean() > 10
+    reference = make_env("select_apple", cameras=["cam_b"], background="ood4")
+    obs_ref, _ = reference.reset(seed=0)
+    np.testing.assert_array_equal(obs_ood["pixels"]["cam_b"], obs_ref["pixels"]["cam_b"])
+
+
+@pytest.mark.parametrize("cameras", [["cam_a"], ["cam_e", "cam_b"], list(gym_omnid.TRAIN_CAMERAS)])
+def test_camera_subsets(make_env, cameras: list[str]) -> None:
+    env = make_env("select_chemistry_tube", cameras=cameras, image_size=48)
+    obs, _ = env.reset(seed=0)
+    assert list(obs["pixels"]) == cameras
+    assert list(env.observation_space["pixels"].spaces) == cameras
+
+
+@pytest.mark.parametrize(("size", "shape"), [(64, (64, 64)), ((96, 160), (96, 160)), (480, (480, 480))])
+def test_image_size(make_env, size, shape) -> None:
+    env = make_env("select_apple", cameras=["cam_c"], image_size=size)
+    obs, _ = env.reset(seed=0)
+    assert obs["pixels"]["cam_c"].shape == (*shape, 3) and obs["pixels"]["cam_c"].dtype == np.uint8
+    assert env.observation_space["pixels"]["cam_c"].shape == (*shape, 3)
+    assert obs["pixels"]["cam_c"].std() > 5  # a real picture, not a blank buffer
+    assert env.camera_calibration("cam_c")["image_size"] == shape
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"task": "select_banana"}, "task"),
+        ({"cameras": ["cam_a", "cam_x"]}, "cameras"),
+        ({"cameras": []}, "cameras"),
+        ({"cameras": ["cam_a", "cam_a"]}, "cameras"),
+        ({"layout": "ood"}, "layout"),
+        ({"background": "ood5"}, "background"),
+        ({"image_size": 0}, "image_size"),
+        ({"image_size": (64, 64, 3)}, "image_size"),
+        ({"image_size": 64.0}, "image_size"),
+        ({"render_mode": "human"}, "render_mode"),
+    ],
+)
+def test_bad_kwargs_raise_value_error_naming_the_field(kwargs: dict, field: str) -> None:
+    kwargs = {"task": "select_apple", **kwargs}
+    bad = next(iter(v for k, v in kwargs.items() if k == field))
+    with pytest.raises(ValueError, match=rf"^{field}: expected .* got ") as err:
+        OmniDEnv(**kwargs)
+    assert repr(bad) in str(err.value) or str(bad) in str(err.value)
+
+
+def test_bad_action_shape(make_env) -> None:
+    env = make_env("select_apple", cameras=["cam_a"], image_size=32)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action"):
+        env.step(np.zeros(3, dtype=np.float32))
+
+
+def test_gripper_state_follows_command(make_env) -> None:
+    env = make_env("select_apple", cameras=["cam_a"], image_size=32)
+    env.reset(seed=0)
+    action = waypoint_action(np.array([0.4, 0.0, 0.3]), 0.0, 1.0)
+    for _ in range(5):
+        obs, *_ = env.step(action)
+    assert obs["agent_pos"][9] == pytest.approx(1.0, abs=0.05)
+    finger = env.model.joint("finger_left").id
+    assert env.data.qpos[env.model.jnt_qposadr[finger]] < 0.1 * FINGER_TRAVEL
