@@ -7,6 +7,7 @@ from pathlib import Path
 import torch
 import torchvision
 from torch import Tensor, nn
+from torch.utils.checkpoint import checkpoint
 
 # ImageNet statistics: a fixed normalisation that does not depend on which camera an image comes from.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -23,12 +24,20 @@ class ResNetFeatures(nn.Module):
         use_group_norm: GroupNorm instead of BatchNorm.
         weights_path: optional local torchvision state dict (e.g. ImageNet weights saved with
             ``torch.save(model.state_dict(), path)``); nothing is downloaded.
+        gradient_checkpointing: in training, keep only each stage's output and recompute the rest in the
+            backward pass.
     """
 
     def __init__(
-        self, name: str, backbone_layer: int, use_group_norm: bool, weights_path: str | None
+        self,
+        name: str,
+        backbone_layer: int,
+        use_group_norm: bool,
+        weights_path: str | None,
+        gradient_checkpointing: bool = False,
     ) -> None:
         super().__init__()
+        self.gradient_checkpointing = gradient_checkpointing
         norm_layer = None
         if use_group_norm:
             if weights_path is not None:
@@ -48,7 +57,8 @@ class ResNetFeatures(nn.Module):
             state = torch.load(path, map_location="cpu", weights_only=True)
             resnet.load_state_dict(state)
         stages = [resnet.layer1, resnet.layer2, resnet.layer3, resnet.layer4][:backbone_layer]
-        self.body = nn.Sequential(resnet.conv1, resnet.bn1, resnet.relu, resnet.maxpool, *stages)
+        self.stem = nn.Sequential(resnet.conv1, resnet.bn1, resnet.relu, resnet.maxpool)
+        self.stages = nn.ModuleList(stages)
         last_block = stages[-1][-1]  # BasicBlock ends in conv2, Bottleneck in conv3
         self.out_channels = getattr(last_block, "conv3", last_block.conv2).out_channels
         self.stride = 2 ** (backbone_layer + 1)
@@ -57,4 +67,8 @@ class ResNetFeatures(nn.Module):
 
     def forward(self, images: Tensor) -> Tensor:
         """(N, 3, H, W) in [0, 1] -> (N, out_channels, ceil(H / stride), ceil(W / stride))."""
-        return self.body((images - self.mean) / self.std)
+        x = (images - self.mean) / self.std
+        recompute = self.gradient_checkpointing and self.training and torch.is_grad_enabled()
+        for block in (self.stem, *self.stages):
+            x = checkpoint(block, x, use_reentrant=False) if recompute else block(x)
+        return x

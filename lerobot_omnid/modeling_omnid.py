@@ -159,6 +159,7 @@ class OmniDModel(nn.Module):
             config.backbone_layer,
             config.use_group_norm,
             config.pretrained_backbone_weights,
+            gradient_checkpointing=config.checkpoint_backbone,
         )
         if config.use_ofg:
             self.ofg = OmniFeatureGenerator(config, self.backbone.out_channels)

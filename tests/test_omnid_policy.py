@@ -117,7 +117,7 @@ def test_gradients_reach_queries_offsets_weights_backbone():
         "sampling_offsets": layer.sampling_offsets.weight,
         "attention_logits": layer.attention_logits.weight,
         "camera_embed": layer.camera_embed[0].weight,
-        "backbone": policy.model.backbone.body[0].weight,
+        "backbone": policy.model.backbone.stem[0].weight,
         "unet": next(policy.model.unet.parameters()),
     }.items():
         assert param.grad is not None and param.grad.abs().sum() > 0, name
