@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
+
+# Importing gym_omnid.constants imports gym_omnid, which registers the gym ids (gymnasium only, cheap).
 from gym_omnid.constants import (
     ACTION_DIM,
     BACKGROUNDS,
@@ -161,8 +163,6 @@ class OmniDEnvConfig(EnvConfig):
         Builds the env once. Returns ``{"observation.images.<cam>": CameraCalibration.to_dict()}`` for
         images of ``image_size``: what a dataset recorded in this setting stores in its feature info.
         """
-        import gym_omnid  # noqa: F401  (registers the gym ids)
-
         env = gym.make(self.gym_id, disable_env_checker=True, **self.gym_kwargs)
         try:
             return {

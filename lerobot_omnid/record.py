@@ -1,0 +1,352 @@
+"""``omnid-record``: run the scripted experts of the OmniD benchmark and write a LeRobot dataset.
+
+Each camera becomes a video feature ``observation.images.<cam>`` whose ``info["calibration"]`` holds
+its :class:`~lerobot_omnid.calibration.CameraCalibration`; ``observation.state`` and ``action`` carry the
+env's state and action names; every frame's ``task`` is the env's language instruction. Only successful
+expert episodes are kept. Attempt ``i`` (counting failed ones) resets the env with seed ``seed + i``, so
+the same arguments give the same data.
+
+Example::
+
+    MUJOCO_GL=egl omnid-record --task select_apple --episodes 50 --root data/omnid_select_apple
+
+Ctrl-C stops after discarding the episode in progress and leaves a loadable dataset of the completed
+episodes (press it again to abort at once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import shutil
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from gym_omnid.constants import BACKGROUNDS, CAMERAS, LAYOUTS, MAX_EPISODE_STEPS, TASKS
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES, OBS_STATE
+from tqdm import tqdm
+
+from lerobot_omnid.calibration import CALIBRATION_INFO_KEY
+from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras
+
+ROBOT_TYPE = "omnid_sim_arm"
+"""``robot_type`` written to the dataset metadata."""
+
+EXIT_INTERRUPTED = 130
+"""Exit status after Ctrl-C (128 + SIGINT), as shells report it."""
+
+@dataclass(frozen=True)
+class RecordSummary:
+    """What one recording produced.
+
+    Args:
+        root: Dataset directory (removed again when no episode was saved).
+        repo_id: Dataset repo id.
+        requested: Number of episodes asked for.
+        episodes: Successful episodes saved.
+        attempts: Expert episodes run, failed and interrupted ones included.
+        frames: Frames saved.
+        wall_time_s: Wall time of the whole recording, seconds.
+        interrupted: Whether Ctrl-C (KeyboardInterrupt) stopped the recording early.
+    """
+
+    root: Path
+    repo_id: str
+    requested: int
+    episodes: int
+    attempts: int
+    frames: int
+    wall_time_s: float
+    interrupted: bool
+
+    @property
+    def complete(self) -> bool:
+        return self.episodes == self.requested
+
+    @property
+    def frames_per_s(self) -> float:
+        return self.frames / self.wall_time_s if self.wall_time_s > 0 else 0.0
+
+    def line(self) -> str:
+        where = str(self.root) if self.episodes else f"nothing kept ({self.root} removed)"
+        return (
+            f"{'Interrupted: ' if self.interrupted else ''}saved {self.episodes}/{self.requested} episodes "
+            f"from {self.attempts} attempts, {self.frames} frames in {self.wall_time_s:.1f} s "
+            f"({self.frames_per_s:.1f} frames/s): {where}"
+        )
+
+
+class _StopOnSigint:
+    """Turn the first SIGINT into a stop request polled by the recording loop.
+
+    The loop then ends at a frame boundary and saving or finalising is never cut in half. A second
+    SIGINT raises KeyboardInterrupt at once. Video encoder processes forked by LeRobot inherit the
+    handler, so they finish their episode too. Outside the main thread (where handlers cannot be set)
+    this is a no-op and KeyboardInterrupt is handled by the loop's ``except``.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous = None
+
+    def _handle(self, signum, frame) -> None:
+        self.requested = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        tqdm.write("Ctrl-C: stopping after discarding the episode in progress (press again to abort now).")
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[_StopOnSigint]:
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        self._previous = signal.signal(signal.SIGINT, self._handle)
+        try:
+            yield self
+        finally:
+            signal.signal(signal.SIGINT, self._previous)
+
+
+def dataset_features(env: gym.Env, cameras: Sequence[str], image_size: int) -> dict[str, dict]:
+    """LeRobot feature spec of the recorded dataset: calibrated videos, named state and action."""
+    unwrapped = env.unwrapped
+    features: dict[str, dict] = {}
+    for cam in cameras:
+        key = f"{OBS_IMAGES}.{cam}"
+        features[key] = {
+            "dtype": "video",
+            "shape": (image_size, image_size, 3),
+            "names": ["height", "width", "channels"],
+            "info": {CALIBRATION_INFO_KEY: calibration_dict(unwrapped, cam, key)},
+        }
+    state_names = list(unwrapped.state_names)
+    action_names = list(unwrapped.action_names)
+    features[OBS_STATE] = {"dtype": "float32", "shape": (len(state_names),), "names": state_names}
+    features[ACTION] = {"dtype": "float32", "shape": (len(action_names),), "names": action_names}
+    return features
+
+
+def _check_root(root: Path) -> None:
+    if root.exists():
+        if not root.is_dir() or any(root.iterdir()):
+            raise FileExistsError(
+                f"--root: {root} already exists and is not an empty directory; refusing to overwrite it. "
+                f"Choose a new directory or delete this one."
+            )
+        root.rmdir()  # LeRobot creates it itself and refuses an existing one
+
+
+def _run_expert_episode(
+    env: gym.Env, dataset: LeRobotDataset, cameras: Sequence[str], seed: int, stop: _StopOnSigint
+) -> bool | None:
+    """Roll out the expert once, adding every frame to the dataset's episode buffer.
+
+    Returns the episode's success, or None when a stop was requested before it ended.
+    """
+    from gym_omnid.experts import make_expert
+
+    obs, _ = env.reset(seed=seed)
+    task = env.unwrapped.task_description
+    expert = make_expert(env.unwrapped)
+    while True:
+        action = np.asarray(expert.act(), dtype=np.float32)
+        frame = {OBS_STATE: np.asarray(obs["agent_pos"], dtype=np.float32), ACTION: action, "task": task}
+        for cam in cameras:
+            frame[f"{OBS_IMAGES}.{cam}"] = obs["pixels"][cam]
+        dataset.add_frame(frame)
+        obs, _, terminated, truncated, info = env.step(action)
+        if stop.requested:
+            return None
+        if terminated or truncated:
+            return bool(info.get("is_success", False))
+
+
+def record_dataset(
+    root: str | Path | None = None,
+    *,
+    task: str = "select_apple",
+    episodes: int = 50,
+    repo_id: str | None = None,
+    cameras: Sequence[str] = CAMERAS,
+    layout: str = "id",
+    background: str = "id",
+    image_size: int = 128,
+    seed: int = 0,
+    max_attempts: int | None = None,
+    episode_length: int = MAX_EPISODE_STEPS,
+    push_to_hub: bool = False,
+    show_progress: bool = True,
+) -> RecordSummary:
+    """Record ``episodes`` successful expert episodes into a new LeRobot dataset at ``root``.
+
+    Args:
+        root: Output directory; must not exist or be empty. Default ``$HF_LEROBOT_HOME/<repo_id>``.
+        task, cameras, layout, background, image_size: The env setting (see ``OmniDEnvConfig``).
+        episodes: Successful episodes to save.
+        repo_id: Dataset id; default ``local/omnid_<task>``.
+        seed: Attempt ``i`` resets the env with ``seed + i``.
+        max_attempts: Bound on expert episodes run (failed ones included); default
+            ``2 * episodes + 10``. Reaching it ends the recording with fewer episodes (see the summary).
+        episode_length: Time limit of one expert attempt, env steps; an attempt that reaches it fails.
+        push_to_hub: Upload with LeRobot's ``push_to_hub`` when the recording completes.
+        show_progress: Show a tqdm bar over episodes.
+    """
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes: expected a positive int, got {episodes!r}")
+    max_attempts = 2 * episodes + 10 if max_attempts is None else max_attempts
+    if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < episodes:
+        raise ValueError(f"max_attempts: expected an int >= episodes ({episodes}), got {max_attempts!r}")
+    cfg = OmniDEnvConfig(task=task, cameras=list(cameras), layout=layout, background=background,
+                         image_size=image_size, episode_length=episode_length)
+    repo_id = repo_id or f"local/omnid_{task}"
+    if push_to_hub and repo_id.startswith("local/"):
+        raise ValueError(f"repo_id: pushing to the Hub needs your namespace (e.g. <user>/omnid_{task}), "
+                         f"got {repo_id!r}")
+    root = Path(root) if root is not None else HF_LEROBOT_HOME / repo_id
+    _check_root(root)
+
+    start = time.perf_counter()
+    env = gym.make(cfg.gym_id, disable_env_checker=True, **cfg.gym_kwargs)
+    stop = _StopOnSigint()
+    dataset = None
+    attempts = saved = 0
+    interrupted = False
+    try:
+        features = dataset_features(env, cfg.cameras, cfg.image_size)
+        # Frames stream to per-camera encoder threads (no PNG round trip). Their queues hold a whole
+        # episode, so a frame is never dropped however slow the encoder is.
+        dataset = LeRobotDataset.create(
+            repo_id, fps=cfg.fps, root=root, features=features, robot_type=ROBOT_TYPE, use_videos=True,
+            video_backend="pyav", streaming_encoding=True, encoder_queue_maxsize=cfg.episode_length + 1,
+        )
+        with stop.installed(), tqdm(total=episodes, unit="ep", desc=f"Recording {task}",
+                                    disable=not show_progress) as bar:
+            while saved < episodes and attempts < max_attempts:
+                attempts += 1
+                success = _run_expert_episode(env, dataset, cfg.cameras, seed + attempts - 1, stop)
+                if success is None:
+                    break
+                if success:
+                    dataset.save_episode()
+                    saved += 1
+                else:
+                    dataset.clear_episode_buffer()
+                frames_per_s = dataset.meta.total_frames / (time.perf_counter() - start)
+                bar.set_postfix({"successes": f"{saved}/{attempts}", "fps": f"{frames_per_s:.1f}"},
+                                refresh=False)
+                if success:
+                    bar.update(1)
+                else:
+                    bar.refresh()
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        interrupted = interrupted or stop.requested
+        if dataset is not None:
+            if dataset.writer.episode_buffer is not None:
+                dataset.clear_episode_buffer()  # the episode in progress, if any (no-op otherwise)
+            dataset.finalize()
+        env.close()
+        if saved == 0:
+            shutil.rmtree(root, ignore_errors=True)  # an empty dataset cannot be loaded: leave nothing
+
+    frames = dataset.meta.total_frames if saved else 0
+    if saved and push_to_hub and not interrupted:
+        dataset.push_to_hub()
+    return RecordSummary(root=root, repo_id=repo_id, requested=episodes, episodes=saved, attempts=attempts,
+                         frames=frames, wall_time_s=time.perf_counter() - start, interrupted=interrupted)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _camera_list(text: str) -> list[str]:
+    cameras = [c.strip() for c in text.split(",") if c.strip()]
+    try:
+        return validate_cameras("cameras", cameras)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"{e} (comma-separated, e.g. cam_b,cam_c)") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="omnid-record",
+        description="Record scripted-expert episodes of an OmniD benchmark task as a LeRobot dataset "
+        "(videos of every camera with calibration, state, action, task text).",
+    )
+    parser.add_argument("--task", choices=TASKS, default="select_apple", help="benchmark task")
+    parser.add_argument("--episodes", type=_positive_int, default=50, help="successful episodes to save")
+    parser.add_argument("--layout", choices=LAYOUTS, default="id", help="object placement")
+    parser.add_argument("--background", choices=BACKGROUNDS, default="id", help="table texture")
+    parser.add_argument("--cameras", type=_camera_list, default=list(CAMERAS),
+                        help=f"comma-separated cameras to record (default: all, {','.join(CAMERAS)})")
+    parser.add_argument("--image-size", type=_positive_int, default=128, help="square image side, pixels")
+    parser.add_argument("--seed", type=int, default=0, help="attempt i resets the env with seed + i")
+    parser.add_argument("--root", type=Path, default=None,
+                        help="output directory, must not exist (default: $HF_LEROBOT_HOME/<repo-id>)")
+    parser.add_argument("--repo-id", default=None, help="dataset repo id (default: local/omnid_<task>)")
+    parser.add_argument("--push-to-hub", action="store_true", help="upload the dataset when complete")
+    parser.add_argument("--max-attempts", type=_positive_int, default=None,
+                        help="bound on expert episodes run, failed ones included "
+                        "(default: 2 * episodes + 10)")
+    return parser
+
+
+def _quiet_third_party_logs() -> None:
+    """Keep the terminal to our progress bar and summary: no per-video encoder banners or per-episode bars."""
+    import av
+    import datasets
+
+    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 (LeRobot's default codec): errors only
+    av.logging.set_libav_level(av.logging.ERROR)  # survives LeRobot restoring FFmpeg's default callback
+    datasets.disable_progress_bars()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.max_attempts is not None and args.max_attempts < args.episodes:
+        parser.error(f"--max-attempts: expected at least --episodes ({args.episodes}), "
+                     f"got {args.max_attempts}")
+    repo_id = args.repo_id or f"local/omnid_{args.task}"
+    if args.push_to_hub and repo_id.startswith("local/"):
+        parser.error(f"--repo-id: --push-to-hub needs your Hub namespace (e.g. <user>/omnid_{args.task}), "
+                     f"got {repo_id!r}")
+    root = args.root if args.root is not None else HF_LEROBOT_HOME / repo_id
+    try:
+        _check_root(root)
+    except FileExistsError as e:
+        parser.error(str(e))
+    _quiet_third_party_logs()
+    summary = record_dataset(
+        root, task=args.task, episodes=args.episodes, repo_id=repo_id, cameras=args.cameras,
+        layout=args.layout, background=args.background, image_size=args.image_size, seed=args.seed,
+        max_attempts=args.max_attempts, push_to_hub=args.push_to_hub,
+    )
+    print(summary.line())
+    if summary.interrupted:
+        return EXIT_INTERRUPTED
+    if not summary.complete:
+        print(f"error: only {summary.episodes} of {summary.requested} expert episodes succeeded within "
+              f"--max-attempts={summary.attempts}; raise it to record more.", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
