@@ -61,7 +61,7 @@ FOREARM_LENGTH = 0.40  # m: elbow axis to wrist centre
 WRIST_TO_TCP = 0.14  # m: wrist centre to the tool centre point (between the finger pads)
 ARM_KP = (900.0, 900.0, 700.0, 250.0, 250.0, 150.0)  # N m / rad: position actuator gains
 ARM_DAMPING = (60.0, 60.0, 45.0, 12.0, 12.0, 8.0)  # N m s / rad: joint damping
-ARM_FORCE_LIMIT = (150.0, 150.0, 120.0, 40.0, 40.0, 30.0)  # N m: actuator torque limits
+ARM_FORCE_LIMIT = (60.0, 60.0, 45.0, 15.0, 15.0, 10.0)  # N m: actuator torque limits (expert peaks ~20)
 
 # --- gripper (two coupled slide fingers) -------------------------------------------------------------
 FINGER_TRAVEL = 0.045  # m: travel of each finger; gap between the pads = 2 * opening per finger

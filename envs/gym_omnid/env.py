@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import atexit
+import weakref
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -97,6 +99,13 @@ def _cameras(value: Sequence[str]) -> tuple[str, ...]:
             f"cameras: expected a non-empty subset of {list(CAMERAS)} without repeats, got {value!r}"
         )
     return cams
+
+
+def _close_at_exit(env_ref: weakref.ref) -> None:
+    """Close a still-open env before MuJoCo's own exit hook terminates the EGL display."""
+    env = env_ref()
+    if env is not None:
+        env.close()
 
 
 class OmniDEnv(gym.Env):
@@ -287,6 +296,8 @@ class OmniDEnv(gym.Env):
         if self._renderer is None:
             height, width = self.image_size
             self._renderer = mujoco.Renderer(self.model, height, width)
+            # Registered after MuJoCo's EGL hook, so it runs first (atexit is LIFO).
+            atexit.register(_close_at_exit, weakref.ref(self))
         pixels = {}
         for cam in self.cameras:
             self._renderer.update_scene(self.data, camera=cam)

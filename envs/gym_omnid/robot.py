@@ -41,6 +41,7 @@ FINGER_HALF = (0.006, 0.012, 0.04)  # m: finger box half sizes (thickness, width
 FINGER_TIP_BEYOND_TCP = 0.02  # m: fingertips extend this far past the tcp
 FINGER_MASS = 0.03  # kg
 FINGER_DAMPING = 8.0  # N s / m
+FINGER_LIMIT_SOLREF = "0.004 1"  # stiff travel limits (time constant = 2 physics steps, s; damping ratio)
 ARM_ARMATURE = 0.05  # kg m^2: rotor inertia added to each arm joint
 FINGER_ARMATURE = 0.01  # kg
 ARM_DENSITY = 400.0  # kg / m^3 of the link primitives
@@ -60,7 +61,7 @@ def _finger(side: str, sign: int, root_z: float) -> str:
     return f"""
         <body name="finger_{side}" pos="0 0 {root_z:.4f}">
           <joint name="finger_{side}" type="slide" axis="{sign} 0 0" range="0 {FINGER_TRAVEL}"
-                 damping="{FINGER_DAMPING}" armature="{FINGER_ARMATURE}"/>
+                 damping="{FINGER_DAMPING}" armature="{FINGER_ARMATURE}" solreflimit="{FINGER_LIMIT_SOLREF}"/>
           <geom name="finger_{side}_pad" class="gripper" type="box" size="{hx} {hy} {hz}"
                 pos="{sign * hx:.4f} 0 {hz:.4f}" mass="{FINGER_MASS}" rgba="0.2 0.2 0.22 1"
                 friction="{FINGER_FRICTION} 0.02 0.002" condim="4"/>

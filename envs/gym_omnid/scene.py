@@ -119,7 +119,8 @@ def build_mjcf(task: Task, image_size: tuple[int, int]) -> str:
   <worldbody>
     <light name="sun" directional="true" pos="0.5 0 3" dir="0.1 0.1 -1" castshadow="false"
            diffuse="0.55 0.55 0.55" specular="0.1 0.1 0.1"/>
-    <geom name="floor" class="decor" type="plane" size="3 3 0.1" pos="0 0 {-TABLE_HEIGHT}" material="floor"/>
+    <geom name="floor" class="fixture" type="plane" size="3 3 0.1" pos="0 0 {-TABLE_HEIGHT}"
+          material="floor"/>
     {_table()}
     {_cameras()}
     {arm_worldbody()}

@@ -235,3 +235,16 @@ def test_gripper_state_follows_command(make_env) -> None:
     assert obs["agent_pos"][9] == pytest.approx(1.0, abs=0.05)
     finger = env.model.joint("finger_left").id
     assert env.data.qpos[env.model.jnt_qposadr[finger]] < 0.1 * FINGER_TRAVEL
+
+
+@pytest.mark.parametrize("task", gym_omnid.TASKS)
+def test_random_actions_stay_physical(make_env, task: str) -> None:
+    """Random targets (hand slammed into the table and objects) keep the state finite, inside the
+    observation space, and raise no MuJoCo warnings (instability, constraint overflow)."""
+    env = make_env(task, cameras=["cam_a"], image_size=32)
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(80):
+        obs, *_ = env.step(env.action_space.sample())
+        assert obs in env.observation_space, obs["agent_pos"]
+    assert all(warning.number == 0 for warning in env.data.warning)
