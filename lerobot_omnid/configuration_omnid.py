@@ -15,6 +15,7 @@ from lerobot_omnid.calibration import (
     CameraCalibration,
     calibration_from_feature_info,
 )
+from lerobot_omnid.calibration_file import image_key, load_calibration_file
 from lerobot_omnid.geometry import AXES, FeatureVolume
 
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
@@ -46,6 +47,8 @@ class OmniDConfig(PreTrainedConfig):
             the dataset's feature info by ``set_dataset_feature_metadata``; saved in ``config.json``.
         cameras: Which of the dataset's cameras the policy uses, by name ("cam_b") or feature key
             ("observation.images.cam_b"); None uses every image feature of the dataset.
+        calibration_path: A calibration file (``lerobot_omnid.calibration_file``) whose cameras override
+            ``camera_calibration`` and the dataset's, e.g. to evaluate on a rig whose cameras moved.
         vision_backbone: torchvision ResNet shared by all cameras ("resnet18"; "resnet101" for the
             paper's ablation).
         pretrained_backbone_weights: Path to a local torchvision state dict for the backbone, or None for
@@ -104,6 +107,7 @@ class OmniDConfig(PreTrainedConfig):
     )
     camera_calibration: dict[str, dict] = field(default_factory=dict)
     cameras: list[str] | None = None
+    calibration_path: str | None = None
 
     # Image backbone.
     vision_backbone: str = "resnet18"
@@ -201,6 +205,26 @@ class OmniDConfig(PreTrainedConfig):
             raise ValueError(f"`volume_bounds` / `volume_shape`: {e}") from e
         for key, calib in self.camera_calibration.items():
             CameraCalibration.from_dict(calib, camera=key)
+        self.camera_calibration.update(self._file_calibrations())
+
+    def _file_calibrations(self) -> dict[str, dict]:
+        if self.calibration_path is None:
+            return {}
+        return {k: c.to_dict() for k, c in load_calibration_file(self.calibration_path).items()}
+
+    def _select_cameras(self) -> None:
+        """Restrict (or extend) the image inputs to ``cameras``; a camera the features do not list yet
+        (evaluation on another view) gets the shape of the existing image features."""
+        if self.cameras is None or not self.input_features:
+            return
+        images = self.image_features
+        template = next(iter(images.values()), None)
+        wanted = [image_key(c) for c in self.cameras]
+        unknown = [k for k in wanted if k not in images and template is None]
+        if unknown:
+            raise ValueError(f"`cameras`: no image feature to take the shape of {unknown} from")
+        others = {k: ft for k, ft in self.input_features.items() if ft.type is not FeatureType.VISUAL}
+        self.input_features = {**others, **{k: images.get(k, template) for k in wanted}}
 
     @property
     def feature_volume(self) -> FeatureVolume:
@@ -230,18 +254,22 @@ class OmniDConfig(PreTrainedConfig):
             if k.startswith("observation.image") and ft.get("dtype") in ("video", "image")
         ]
         if self.cameras is not None:
-            wanted = [
-                c if c.startswith("observation.image") else f"observation.images.{c}" for c in self.cameras
-            ]
+            wanted = [image_key(c) for c in self.cameras]
             missing = [k for k in wanted if k not in image_keys]
             if missing:
                 raise ValueError(f"`cameras`: {missing} not among the dataset's image features {image_keys}")
             image_keys = wanted
         # The "w/o OFG" ablation does not use calibration: keep whatever the dataset has.
+        # A calibration file overrides the dataset's calibration.
+        from_file = self._file_calibrations()
         self.camera_calibration = {
-            k: calibration_from_feature_info(k, dataset_features[k]).to_dict()
+            k: from_file[k]
+            if k in from_file
+            else calibration_from_feature_info(k, dataset_features[k]).to_dict()
             for k in image_keys
-            if self.use_ofg or CALIBRATION_INFO_KEY in (dataset_features[k].get("info") or {})
+            if self.use_ofg
+            or k in from_file
+            or CALIBRATION_INFO_KEY in (dataset_features[k].get("info") or {})
         }
         if self.input_features:
             policy_features = dataset_to_policy_features(dataset_features)
@@ -250,6 +278,7 @@ class OmniDConfig(PreTrainedConfig):
             self.input_features = {**others, **dataset_images}
 
     def validate_features(self) -> None:
+        self._select_cameras()
         if not self.image_features:
             raise ValueError("OmniD needs at least one `observation.images.*` input feature.")
         if self.robot_state_feature is None:
