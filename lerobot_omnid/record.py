@@ -30,19 +30,20 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from gym_omnid.constants import BACKGROUNDS, CAMERAS, LAYOUTS, MAX_EPISODE_STEPS, TASKS
+from gym_omnid.constants import BACKGROUNDS, CAMERAS, LAYOUTS, MAX_EPISODE_STEPS, MAX_IMAGE_SIDE, TASKS
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES, OBS_STATE
 from tqdm import tqdm
 
 from lerobot_omnid.calibration import CALIBRATION_INFO_KEY
-from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras
+from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras, validate_image_size
 
 ROBOT_TYPE = "omnid_sim_arm"
 """``robot_type`` written to the dataset metadata."""
 
 EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (128 + SIGINT), as shells report it."""
+
 
 @dataclass(frozen=True)
 class RecordSummary:
@@ -89,9 +90,9 @@ class _StopOnSigint:
     """Turn the first SIGINT into a stop request polled by the recording loop.
 
     The loop then ends at a frame boundary and saving or finalising is never cut in half. A second
-    SIGINT raises KeyboardInterrupt at once. Video encoder processes forked by LeRobot inherit the
-    handler, so they finish their episode too. Outside the main thread (where handlers cannot be set)
-    this is a no-op and KeyboardInterrupt is handled by the loop's ``except``.
+    SIGINT raises KeyboardInterrupt at once. (Without streaming encoding, the encoder processes that
+    LeRobot forks inherit the handler and finish their videos too.) Outside the main thread, where
+    handlers cannot be set, this is a no-op and KeyboardInterrupt is handled by the loop's ``except``.
     """
 
     def __init__(self) -> None:
@@ -182,6 +183,7 @@ def record_dataset(
     seed: int = 0,
     max_attempts: int | None = None,
     episode_length: int = MAX_EPISODE_STEPS,
+    streaming_encoding: bool = True,
     push_to_hub: bool = False,
     show_progress: bool = True,
 ) -> RecordSummary:
@@ -196,6 +198,8 @@ def record_dataset(
         max_attempts: Bound on expert episodes run (failed ones included); default
             ``2 * episodes + 10``. Reaching it ends the recording with fewer episodes (see the summary).
         episode_length: Time limit of one expert attempt, env steps; an attempt that reaches it fails.
+        streaming_encoding: Encode videos in threads while recording instead of LeRobot's default of
+            writing PNG files and encoding them when the episode is saved (slower: bench_record.py).
         push_to_hub: Upload with LeRobot's ``push_to_hub`` when the recording completes.
         show_progress: Show a tqdm bar over episodes.
     """
@@ -221,11 +225,12 @@ def record_dataset(
     interrupted = False
     try:
         features = dataset_features(env, cfg.cameras, cfg.image_size)
-        # Frames stream to per-camera encoder threads (no PNG round trip). Their queues hold a whole
-        # episode, so a frame is never dropped however slow the encoder is.
+        # Streaming: frames go to per-camera encoder threads (no PNG round trip). Their queues hold a
+        # whole episode, so a frame is never dropped however slow the encoder is.
         dataset = LeRobotDataset.create(
             repo_id, fps=cfg.fps, root=root, features=features, robot_type=ROBOT_TYPE, use_videos=True,
-            video_backend="pyav", streaming_encoding=True, encoder_queue_maxsize=cfg.episode_length + 1,
+            video_backend="pyav", streaming_encoding=streaming_encoding,
+            encoder_queue_maxsize=cfg.episode_length + 1,
         )
         with stop.installed(), tqdm(total=episodes, unit="ep", desc=f"Recording {task}",
                                     disable=not show_progress) as bar:
@@ -280,7 +285,17 @@ def _camera_list(text: str) -> list[str]:
     try:
         return validate_cameras("cameras", cameras)
     except ValueError as e:
-        raise argparse.ArgumentTypeError(f"{e} (comma-separated, e.g. cam_b,cam_c)") from None
+        message = str(e).removeprefix("cameras: ")
+        raise argparse.ArgumentTypeError(f"{message} (comma-separated, e.g. cam_b,cam_c)") from None
+
+
+def _image_size(text: str) -> int:
+    try:
+        return validate_image_size("image_size", int(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an int number of pixels in [1, {MAX_IMAGE_SIDE}], got {text!r}"
+        ) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -289,25 +304,33 @@ def build_parser() -> argparse.ArgumentParser:
         description="Record scripted-expert episodes of an OmniD benchmark task as a LeRobot dataset "
         "(videos of every camera with calibration, state, action, task text).",
     )
-    parser.add_argument("--task", choices=TASKS, default="select_apple", help="benchmark task")
-    parser.add_argument("--episodes", type=_positive_int, default=50, help="successful episodes to save")
-    parser.add_argument("--layout", choices=LAYOUTS, default="id", help="object placement")
-    parser.add_argument("--background", choices=BACKGROUNDS, default="id", help="table texture")
-    parser.add_argument("--cameras", type=_camera_list, default=list(CAMERAS),
-                        help=f"comma-separated cameras to record (default: all, {','.join(CAMERAS)})")
-    parser.add_argument("--image-size", type=_positive_int, default=128, help="square image side, pixels")
-    parser.add_argument("--seed", type=int, default=0, help="attempt i resets the env with seed + i")
+    parser.add_argument("--task", choices=TASKS, default="select_apple",
+                        help="benchmark task (default: %(default)s)")
+    parser.add_argument("--episodes", type=_positive_int, default=50,
+                        help="successful episodes to save (default: %(default)s)")
+    parser.add_argument("--layout", choices=LAYOUTS, default="id",
+                        help="object placement (default: %(default)s)")
+    parser.add_argument("--background", choices=BACKGROUNDS, default="id",
+                        help="table texture (default: %(default)s)")
+    parser.add_argument("--cameras", type=_camera_list, default=",".join(CAMERAS),
+                        help="comma-separated cameras to record (default: %(default)s)")
+    parser.add_argument("--image-size", type=_image_size, default=128,
+                        help="square image side, pixels (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="attempt i resets the env with seed + i (default: %(default)s)")
     parser.add_argument("--root", type=Path, default=None,
-                        help="output directory, must not exist (default: $HF_LEROBOT_HOME/<repo-id>)")
+                        help="output directory, must not exist or be empty "
+                        "(default: $HF_LEROBOT_HOME/<repo-id>)")
     parser.add_argument("--repo-id", default=None, help="dataset repo id (default: local/omnid_<task>)")
-    parser.add_argument("--push-to-hub", action="store_true", help="upload the dataset when complete")
+    parser.add_argument("--push-to-hub", action="store_true",
+                        help="upload the dataset with LeRobot's push_to_hub when complete")
     parser.add_argument("--max-attempts", type=_positive_int, default=None,
                         help="bound on expert episodes run, failed ones included "
                         "(default: 2 * episodes + 10)")
     return parser
 
 
-def _quiet_third_party_logs() -> None:
+def quiet_third_party_logs() -> None:
     """Keep the terminal to our progress bar and summary: no per-video encoder banners or per-episode bars."""
     import av
     import datasets
@@ -332,7 +355,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _check_root(root)
     except FileExistsError as e:
         parser.error(str(e))
-    _quiet_third_party_logs()
+    quiet_third_party_logs()
     summary = record_dataset(
         root, task=args.task, episodes=args.episodes, repo_id=repo_id, cameras=args.cameras,
         layout=args.layout, background=args.background, image_size=args.image_size, seed=args.seed,

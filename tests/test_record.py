@@ -203,6 +203,7 @@ def test_main_records_and_prints_summary(tmp_path, capsys):
         (["--background", "ood9"], ["--background", "ood9", "ood4"]),
         (["--episodes", "0"], ["--episodes", "positive", "0"]),
         (["--image-size", "-1"], ["--image-size", "-1"]),
+        (["--image-size", "5000"], ["--image-size", "2048", "5000"]),
         (["--episodes", "3", "--max-attempts", "2"], ["--max-attempts", "3", "2"]),
         (["--push-to-hub"], ["--repo-id", "namespace", "local/omnid_select_apple"]),
     ],
