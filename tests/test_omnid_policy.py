@@ -1,5 +1,7 @@
 """OmniD policy: per-sample calibration, camera subsets, gradients, save/load, bad input."""
 
+import json
+
 import pytest
 import torch
 from conftest import ACTION_DIM, STATE_DIM, random_batch, synthetic_calibration, tiny_config
@@ -233,3 +235,30 @@ def test_dataset_calibration_flows_into_config():
     config.cameras = ["cam_z"]
     with pytest.raises(ValueError, match="`cameras`"):
         config.set_dataset_feature_metadata(features)
+
+
+def test_calibration_file_and_cameras_select_an_unseen_view(tmp_path):
+    """Evaluation on a view the checkpoint never saw: `cameras` + `calibration_path` on the loaded config."""
+    trained = OmniDPolicy(tiny_config())
+    trained.save_pretrained(tmp_path / "ckpt")
+    calib_file = tmp_path / "rig.json"
+    calib_file.write_text(json.dumps({"cam_a": synthetic_calibration("cam_a", SIZE)}))
+    config = OmniDConfig.from_pretrained(tmp_path / "ckpt")
+    config.cameras = ["cam_a"]
+    config.calibration_path = str(calib_file)
+    config.__post_init__()
+    policy = OmniDPolicy.from_pretrained(tmp_path / "ckpt", config=config).eval()
+    assert policy.camera_keys == ["observation.images.cam_a"]
+    assert policy.config.camera_calibration["observation.images.cam_a"] == synthetic_calibration(
+        "cam_a", SIZE
+    )
+    assert policy.select_action(observation(policy.config)).shape == (1, ACTION_DIM)
+
+
+def test_bad_calibration_file_names_file_and_camera(tmp_path):
+    bad = synthetic_calibration("cam_a", SIZE)
+    bad["K"] = [[1.0, 0.0], [0.0, 1.0]]
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps({"cam_a": bad}))
+    with pytest.raises(CalibrationError, match=r"rig\.json: cam_a\.K: expected a 3x3"):
+        tiny_config(calibration_path=str(path))
