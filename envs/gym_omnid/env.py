@@ -44,7 +44,7 @@ from gym_omnid.ik import DampedLeastSquaresIK
 from gym_omnid.robot import FINGER_JOINTS, TCP_SITE
 from gym_omnid.rotations import matrix_from_rot6d, rot6d_from_matrix
 from gym_omnid.scene import TABLE_TEXTURE, build_mjcf
-from gym_omnid.tasks import make_task
+from gym_omnid.tasks import Task, make_task
 from gym_omnid.textures import BACKGROUND_TEXTURES
 
 RENDER_MODES = ("rgb_array",)
@@ -93,6 +93,7 @@ def _state_bounds() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _cameras(value: Sequence[str]) -> tuple[str, ...]:
+    """Validate ``cameras`` (a name or a sequence of distinct names from ``CAMERAS``), order kept."""
     cams = (value,) if isinstance(value, str) else tuple(value)
     if not cams or len(set(cams)) != len(cams) or not set(cams) <= set(CAMERAS):
         raise ValueError(
@@ -269,7 +270,7 @@ class OmniDEnv(gym.Env):
             self._last_pixels = None
 
     @property
-    def task_spec(self):
+    def task_spec(self) -> Task:
         """The :class:`gym_omnid.tasks.Task` instance (privileged access for experts and tests)."""
         return self._task
 
@@ -279,9 +280,11 @@ class OmniDEnv(gym.Env):
 
     # --- internals -------------------------------------------------------------------------------
     def _qpos_adr(self, joints: Sequence[str]) -> np.ndarray:
+        """qpos addresses of single-dof joints."""
         return np.array([self.model.jnt_qposadr[self.model.joint(name).id] for name in joints])
 
     def _actuator_ids(self, names: Sequence[str]) -> np.ndarray:
+        """Actuator ids by name."""
         return np.array([self.model.actuator(name).id for name in names])
 
     def _reset_robot(self) -> None:
@@ -293,6 +296,7 @@ class OmniDEnv(gym.Env):
         self.data.ctrl[self._finger_ctrl] = FINGER_TRAVEL
 
     def _render_cameras(self) -> dict[str, np.ndarray]:
+        """Render every observed camera with the one shared renderer (created on first use)."""
         if self._renderer is None:
             height, width = self.image_size
             self._renderer = mujoco.Renderer(self.model, height, width)
@@ -305,6 +309,7 @@ class OmniDEnv(gym.Env):
         return pixels
 
     def _observation(self) -> dict:
+        """Render the cameras and assemble ``{"pixels", "agent_pos"}`` in the ``state_names`` layout."""
         self._last_pixels = self._render_cameras()
         tcp_xyz, world_R_tcp = self.tcp_pose()
         finger_gap = float(np.sum(self.data.qpos[self._finger_qpos]))
