@@ -11,6 +11,7 @@ import torch
 import torch.nn.functional as F
 from diffusers.schedulers.scheduling_ddim import DDIMScheduler
 from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
+from huggingface_hub import ModelCard
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionConditionalUnet1d, SpatialSoftmax
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.policies.utils import get_output_shape, populate_queues
@@ -20,6 +21,7 @@ from torch import Tensor, nn
 from lerobot_omnid.backbone import ResNetFeatures
 from lerobot_omnid.configuration_omnid import OmniDConfig
 from lerobot_omnid.geometry import scale_intrinsics
+from lerobot_omnid.model_card import find_eval_results, omnid_card_section
 from lerobot_omnid.omni_feature_generator import OFGOutput, OmniFeatureGenerator
 
 
@@ -41,6 +43,13 @@ class OmniDPolicy(PreTrainedPolicy):
         self.config = config
         self.model = OmniDModel(config)
         self.reset()
+
+    def generate_model_card(self, *args, cfg=None, **kwargs) -> ModelCard:
+        """LeRobot's card plus the cameras, their calibration and the evaluations found in the run."""
+        card = super().generate_model_card(*args, cfg=cfg, **kwargs)
+        results = find_eval_results(cfg.output_dir) if cfg is not None and cfg.output_dir else {}
+        card.content = card.content + omnid_card_section(self.config, results)
+        return card
 
     def get_optim_params(self) -> dict:
         return self.model.parameters()
