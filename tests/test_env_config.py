@@ -8,10 +8,18 @@ from dataclasses import dataclass
 import draccus
 import numpy as np
 import pytest
+import torch
+from gym_omnid.experts import make_expert
 from lerobot.configs import FeatureType
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env
 from lerobot.envs.utils import env_to_policy_features, preprocess_observation
+from lerobot.processor import (
+    PolicyProcessorPipeline,
+    policy_action_to_transition,
+    transition_to_policy_action,
+)
+from lerobot.scripts.lerobot_eval import rollout
 
 from lerobot_omnid.calibration import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig
@@ -125,3 +133,34 @@ def test_camera_calibrations_are_valid_for_image_size():
     for key, data in calibs.items():
         calib = CameraCalibration.from_dict(data, camera=key)
         assert calib.image_size == (64, 64)
+
+
+class _ExpertPolicy(torch.nn.Module):
+    """Drives the scripted expert of sub-env 0 through LeRobot's policy interface."""
+
+    def __init__(self, vec):
+        super().__init__()
+        self.vec, self.expert = vec, None
+
+    def reset(self):
+        self.expert = None
+
+    def select_action(self, batch):
+        if self.expert is None:
+            self.expert = make_expert(self.vec.envs[0].unwrapped)
+        return torch.from_numpy(self.expert.act()).float()[None]
+
+
+def test_lerobot_rollout_counts_expert_success():
+    """``lerobot-eval``'s own rollout reads ``is_success`` from our env: the expert scores a success."""
+    cfg = OmniDEnvConfig(cameras=["cam_c"], image_size=32)
+    vec = make_env(cfg, n_envs=1)["omnid"][0]
+    identity = PolicyProcessorPipeline(steps=[])
+    actions = PolicyProcessorPipeline(steps=[], to_transition=policy_action_to_transition,
+                                      to_output=transition_to_policy_action)
+    try:
+        result = rollout(vec, _ExpertPolicy(vec), identity, identity, identity, actions, seeds=[0])
+    finally:
+        vec.close()
+    assert result["success"].any()
+    assert result["done"][0, -1] and result["action"].shape[1] < cfg.episode_length
