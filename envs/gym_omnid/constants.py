@@ -29,7 +29,7 @@ LAYOUT_MAX_TRIES = 200  # rejection-sampling attempts before a layout sampler gi
 
 # --- rendering ---------------------------------------------------------------------------------------
 CAMERA_FOVY = 50.0  # deg: vertical field of view of every fixed camera
-TABLE_TEXTURE_SIZE = 256  # px: side of the square table-top texture
+TABLE_TEXTURE_SIZE = 128  # px: side of the square table-top texture (about 1 cm per texel)
 RENDER_MOSAIC_COLUMNS = 3  # images per row in render()'s mosaic of the observed cameras
 # Tessellation of spheres, capsules and cylinders (MuJoCo's defaults are 28 / 16 / 4): halves the
 # software-rendering time at 128 px with no visible loss.

@@ -12,8 +12,8 @@ import numpy as np
 
 NOISE_TEXTURE_SEED = 20240611  # fixed seed of the OOD3 noise pattern (content, not episode randomness)
 CHECKER_CELLS = 8  # squares per side of the OOD1 checkerboard
-STRIPE_PERIOD = 32  # px: period of the OOD4 stripes
-NOISE_CELL = 8  # px: size of one OOD3 noise cell before smoothing
+STRIPE_PERIOD = 16  # px: period of the OOD4 stripes
+NOISE_CELL = 4  # px: size of one OOD3 noise cell before smoothing
 
 
 def _grid(size: int) -> tuple[np.ndarray, np.ndarray]:
