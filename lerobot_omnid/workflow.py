@@ -1,0 +1,302 @@
+"""The main job: record a select_apple dataset with the scripted expert, train OmniD with `lerobot-train`,
+evaluate it with `lerobot-eval` in the ID and position-OOD layouts, and write a markdown report.
+
+Every stage is a real console command (`omnid-record`, `lerobot-train`, `lerobot-eval`), run as a
+subprocess whose output goes to the terminal and to ``<out>/logs/<stage>.log``; the commands are
+written into the report so that each can be rerun by hand. A stage whose result exists is not redone.
+
+    omnid-demo                       # CPU budget: about 30 minutes on 2 cores
+    omnid-demo --profile gpu --device cuda
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+BIN = Path(sys.executable).parent
+TRAIN_CAMERAS = ("cam_b", "cam_c", "cam_d", "cam_e")
+# The benchmark's workspace in the robot base frame (objects lie in x 0.3..0.8, y -0.3..0.35), metres.
+SIM_VOLUME_BOUNDS = "[[0.2,0.84],[-0.4,0.4],[0.0,0.32]]"
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Sizes of one run of the main job."""
+
+    episodes: int
+    image_size: int
+    steps: int
+    batch_size: int
+    eval_episodes: int
+    policy_flags: tuple[str, ...]
+
+
+# Model sizes chosen for the budget: the CPU profile keeps the paper's structure (ResNet-18, OFG with
+# self-attention and deformable camera attention, UNet diffusion head) at a size that trains on 2 cores.
+PROFILES = {
+    "cpu": Profile(
+        episodes=20,
+        image_size=96,
+        steps=400,
+        batch_size=8,
+        eval_episodes=5,
+        policy_flags=(
+            f"--policy.volume_bounds={SIM_VOLUME_BOUNDS}",
+            "--policy.volume_shape=[16,20,8]",
+            "--policy.d_model=64",
+            "--policy.num_layers=2",
+            "--policy.backbone_layer=3",
+            "--policy.down_dims=[128,256,512]",
+            "--policy.optimizer_lr=3e-4",
+            "--policy.scheduler_warmup_steps=50",
+            "--policy.noise_scheduler_type=DDIM",
+            "--policy.num_inference_steps=10",
+        ),
+    ),
+    "gpu": Profile(
+        episodes=50,
+        image_size=128,
+        steps=30000,
+        batch_size=16,
+        eval_episodes=50,
+        policy_flags=(
+            f"--policy.volume_bounds={SIM_VOLUME_BOUNDS}",
+            "--policy.volume_shape=[32,40,16]",
+            "--policy.backbone_layer=3",
+            "--policy.noise_scheduler_type=DDIM",
+            "--policy.num_inference_steps=10",
+        ),
+    ),
+}
+
+
+def record_command(
+    task: str,
+    episodes: int,
+    cameras: tuple[str, ...],
+    image_size: int,
+    root: Path,
+    seed: int = 0,
+    layout: str = "id",
+) -> list[str]:
+    return [
+        str(BIN / "omnid-record"),
+        "--task",
+        task,
+        "--episodes",
+        str(episodes),
+        "--cameras",
+        ",".join(cameras),
+        "--image-size",
+        str(image_size),
+        "--layout",
+        layout,
+        "--seed",
+        str(seed),
+        "--root",
+        str(root),
+        "--repo-id",
+        f"local/{root.name}",
+    ]
+
+
+def train_command(
+    dataset_root: Path,
+    output_dir: Path,
+    profile: Profile,
+    device: str,
+    task: str,
+    cameras: tuple[str, ...],
+    extra: tuple[str, ...] = (),
+) -> list[str]:
+    """`lerobot-train` of OmniD, evaluating in the env halfway and at the end of training."""
+    return [
+        str(BIN / "lerobot-train"),
+        f"--dataset.repo_id=local/{dataset_root.name}",
+        f"--dataset.root={dataset_root}",
+        "--dataset.video_backend=pyav",
+        "--policy.type=omnid",
+        f"--policy.device={device}",
+        "--policy.push_to_hub=false",
+        f"--policy.cameras=[{','.join(cameras)}]",
+        *profile.policy_flags,
+        "--env.type=omnid",
+        f"--env.task={task}",
+        f"--env.cameras=[{','.join(cameras)}]",
+        f"--env.image_size={profile.image_size}",
+        f"--env_eval_freq={max(profile.steps // 2, 1)}",
+        "--eval.n_episodes=2",
+        "--eval.batch_size=1",
+        f"--steps={profile.steps}",
+        f"--batch_size={profile.batch_size}",
+        f"--save_freq={profile.steps}",
+        "--num_workers=2",
+        "--log_freq=25",
+        f"--output_dir={output_dir}",
+        "--wandb.enable=false",
+        *extra,
+    ]
+
+
+def eval_command(
+    checkpoint: Path,
+    output_dir: Path,
+    task: str,
+    layout: str,
+    cameras: tuple[str, ...],
+    image_size: int,
+    episodes: int,
+    device: str,
+    background: str = "id",
+    extra: tuple[str, ...] = (),
+) -> list[str]:
+    return [
+        str(BIN / "lerobot-eval"),
+        f"--policy.path={checkpoint}",
+        f"--policy.device={device}",
+        "--env.type=omnid",
+        f"--env.task={task}",
+        f"--env.layout={layout}",
+        f"--env.background={background}",
+        f"--env.cameras=[{','.join(cameras)}]",
+        f"--env.image_size={image_size}",
+        f"--eval.n_episodes={episodes}",
+        "--eval.batch_size=1",
+        f"--output_dir={output_dir}",
+        *extra,
+    ]
+
+
+def run_stage(name: str, cmd: list[str], logs: Path) -> float:
+    """Run one command, mirroring its output to the terminal and to ``logs/<name>.log``; seconds taken."""
+    logs.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    with (
+        open(logs / f"{name}.log", "w") as log,
+        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1) as proc,
+    ):
+        log.write(" ".join(cmd) + "\n")
+        for line in proc.stdout:
+            sys.stdout.write(line)
+            log.write(line)
+    if proc.returncode != 0:
+        raise SystemExit(f"stage '{name}' failed (exit code {proc.returncode}); see {logs / f'{name}.log'}")
+    return time.perf_counter() - start
+
+
+def success_rate(eval_dir: Path) -> tuple[float, int]:
+    overall = json.loads((eval_dir / "eval_info.json").read_text())["overall"]
+    return overall["pc_success"], overall["n_episodes"]
+
+
+def write_report(
+    path: Path,
+    profile_name: str,
+    rows: list[tuple[str, float, int, Path]],
+    checkpoint: Path,
+    commands: dict[str, list[str]],
+    timings: dict[str, float],
+) -> None:
+    lines = [
+        "# OmniD main job: select_apple, cameras B-E",
+        "",
+        f"Profile `{profile_name}`. Checkpoint: `{checkpoint}`.",
+        "",
+        "| evaluation | episodes | success rate (%) | videos |",
+        "| --- | --- | --- | --- |",
+    ]
+    for name, rate, n, eval_dir in rows:
+        lines.append(f"| {name} | {n} | {rate:.1f} | `{eval_dir / 'videos'}` |")
+    lines += ["", "## Stages", "", "| stage | seconds | command |", "| --- | --- | --- |"]
+    for name, cmd in commands.items():
+        seconds = f"{timings[name]:.0f}" if name in timings else "(reused)"
+        lines.append(f"| {name} | {seconds} | `{' '.join(cmd)}` |")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--profile", choices=sorted(PROFILES), default="cpu", help="budget (default: cpu)")
+    parser.add_argument("--device", default="cpu", help="torch device for training and evaluation")
+    parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
+    parser.add_argument("--episodes", type=int, help="override the profile's number of expert episodes")
+    parser.add_argument("--steps", type=int, help="override the profile's training steps")
+    parser.add_argument("--eval-episodes", type=int, help="override the profile's evaluation episodes")
+    parser.add_argument("--episode-length", type=int, help="time limit of evaluation episodes, env steps")
+    args = parser.parse_args(argv)
+    for option in ("episodes", "steps", "eval_episodes", "episode_length"):
+        value = getattr(args, option)
+        if value is not None and value < 1:
+            parser.error(f"--{option.replace('_', '-')}: expected a positive integer, got {value}")
+    base = PROFILES[args.profile]
+    profile = Profile(
+        episodes=args.episodes or base.episodes,
+        image_size=base.image_size,
+        steps=args.steps or base.steps,
+        batch_size=base.batch_size,
+        eval_episodes=args.eval_episodes or base.eval_episodes,
+        policy_flags=base.policy_flags,
+    )
+
+    out = args.out.resolve()
+    logs = out / "logs"
+    dataset = out / "data" / "select_apple_bcde"
+    train_dir = out / "train"
+    checkpoint = train_dir / "checkpoints" / "last" / "pretrained_model"
+    layouts = ("id", "position_ood")
+    env_flags = (f"--env.episode_length={args.episode_length}",) if args.episode_length else ()
+    commands = {
+        "record": record_command(
+            "select_apple", profile.episodes, TRAIN_CAMERAS, profile.image_size, dataset
+        ),
+        "train": train_command(
+            dataset, train_dir, profile, args.device, "select_apple", TRAIN_CAMERAS, env_flags
+        ),
+        **{
+            f"eval_{layout}": eval_command(
+                checkpoint,
+                out / f"eval_{layout}",
+                "select_apple",
+                layout,
+                TRAIN_CAMERAS,
+                profile.image_size,
+                profile.eval_episodes,
+                args.device,
+                extra=env_flags,
+            )
+            for layout in layouts
+        },
+    }
+    done = {
+        "record": (dataset / "meta" / "info.json").is_file(),
+        "train": (checkpoint / "model.safetensors").is_file(),
+        **{f"eval_{layout}": (out / f"eval_{layout}" / "eval_info.json").is_file() for layout in layouts},
+    }
+    timings = {}
+    stages = tqdm(commands.items(), desc="OmniD main job", unit="stage", file=sys.stdout)
+    for name, cmd in stages:
+        stages.set_postfix_str(name)
+        if done[name]:
+            print(f"[{name}] already done, reusing its result")
+            continue
+        timings[name] = run_stage(name, cmd, logs)
+    rows = [(layout, *success_rate(out / f"eval_{layout}"), out / f"eval_{layout}") for layout in layouts]
+    report = out / "report.md"
+    write_report(report, args.profile, rows, checkpoint, commands, timings)
+    summary = ", ".join(f"{name} {rate:.0f}% of {n}" for name, rate, n, _ in rows)
+    print(f"Done in {sum(timings.values()):.0f} s: success {summary}. Report: {report}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
