@@ -1,0 +1,407 @@
+"""Calibration files (JSON/YAML, T_world_cam, distortion) and ``omnid-attach-calibration``: a dataset
+recorded without calibration gets one, is loadable by LeRobot and accepted by OmniD, keeps its data and
+videos byte for byte, and a bad file leaves it untouched with an error naming camera and field."""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ACTION_DIM, STATE_DIM, tiny_config
+from gym_omnid.calibration import mujoco_camera_calibration
+from gym_omnid.constants import CAMERA_FOVY
+from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
+
+import lerobot_omnid.calibration_file as calibration_file
+from lerobot_omnid.attach_calibration import main
+from lerobot_omnid.calibration import CalibrationError, CameraCalibration, calibration_from_feature_info
+from lerobot_omnid.calibration_file import load_calibration_file, load_calibration_meta, save_calibration_file
+
+REPO_ID = "local/uncalibrated"
+CAMS = ("cam_b", "cam_c")
+SIZE = (32, 48)  # (height, width) stored in the dataset: not square, so swapped sizes are caught
+BIN = Path(sys.executable).parent
+
+
+def sim_calibration(cam: str, size: tuple[int, int] = SIZE) -> dict:
+    """JSON-ready calibration of one benchmark camera (the env's placement and field of view)."""
+    position, target = CAMERA_POSES[cam]
+    xyaxes = look_at_xyaxes(position, target)
+    world_R_mjcam = np.stack([xyaxes[:3], xyaxes[3:], np.cross(xyaxes[:3], xyaxes[3:])], axis=1)
+    calib = mujoco_camera_calibration(CAMERA_FOVY, np.array(position), world_R_mjcam, size)
+    return {"K": calib["K"].tolist(), "T_cam_world": calib["T_cam_world"].tolist(), "image_size": list(size)}
+
+
+def make_uncalibrated_dataset(root: Path) -> None:
+    """A LeRobotDataset as LeRobot's own recorder writes it: video cameras without calibration."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    height, width = SIZE
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (STATE_DIM,), "names": None},
+        "action": {"dtype": "float32", "shape": (ACTION_DIM,), "names": None},
+        **{
+            f"observation.images.{cam}": {
+                "dtype": "video",
+                "shape": (height, width, 3),
+                "names": ["height", "width", "channels"],
+            }
+            for cam in CAMS
+        },
+    }
+    dataset = LeRobotDataset.create(REPO_ID, fps=10, features=features, root=root, use_videos=True)
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        frame = {f"observation.images.{c}": rng.integers(0, 256, (height, width, 3), np.uint8) for c in CAMS}
+        frame["observation.state"] = rng.standard_normal(STATE_DIM).astype(np.float32)
+        frame["action"] = rng.standard_normal(ACTION_DIM).astype(np.float32)
+        frame["task"] = "pick the cube"
+        dataset.add_frame(frame)
+    dataset.save_episode()
+    dataset.finalize()
+
+
+@pytest.fixture(scope="module")
+def pristine(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("pristine") / "dataset"
+    make_uncalibrated_dataset(root)
+    return root
+
+
+@pytest.fixture
+def dataset(pristine, tmp_path) -> Path:
+    root = tmp_path / "dataset"
+    shutil.copytree(pristine, root)
+    return root
+
+
+def digests(root: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+def write(path: Path, data: dict) -> Path:
+    path.write_text(json.dumps(data))
+    return path
+
+
+# --- calibration files -------------------------------------------------------------------------------
+
+
+def test_yaml_and_json_round_trip_with_meta(tmp_path):
+    calibs = {f"observation.images.{c}": CameraCalibration.from_dict(sim_calibration(c)) for c in CAMS}
+    calibs["observation.images.cam_b"] = CameraCalibration(
+        **{**calibs["observation.images.cam_b"].__dict__, "distortion": (0.1, -0.2, 0.001, 0.0, 0.05)}
+    )
+    meta = {"cam_b": {"intrinsics_rms_px": np.float64(0.2), "views": np.int64(12)}}
+    for name in ("rig.yaml", "rig.json"):
+        path = save_calibration_file(tmp_path / name, calibs, meta)
+        assert load_calibration_file(path) == calibs
+        assert load_calibration_meta(path) == {
+            "observation.images.cam_b": {"intrinsics_rms_px": 0.2, "views": 12}
+        }
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.json", "rig.yaml"]  # no temporary files left
+
+
+def test_t_world_cam_is_inverted_and_bare_names_accepted(tmp_path):
+    data = sim_calibration("cam_b")
+    world_T_cam = np.linalg.inv(np.array(data.pop("T_cam_world"))).tolist()
+    loaded = load_calibration_file(
+        write(tmp_path / "rig.json", {"cam_b": {**data, "T_world_cam": world_T_cam}})
+    )
+    expected = np.array(sim_calibration("cam_b")["T_cam_world"])
+    np.testing.assert_allclose(loaded["observation.images.cam_b"].T_cam_world, expected, atol=1e-12)
+    # The camera's optical centre is the translation of T_world_cam.
+    np.testing.assert_allclose(np.array(world_T_cam)[:3, 3], CAMERA_POSES["cam_b"][0], atol=1e-12)
+
+
+def test_module_docstring_example_is_valid():
+    pytest.importorskip("yaml")
+    import yaml
+
+    example = calibration_file.__doc__.split("Example (YAML)::")[1].split("The same in JSON")[0]
+    data = yaml.safe_load(example)
+    calib = calibration_file.parse_camera_entry(data["observation.images.front"], "front")
+    centre = np.linalg.inv(np.array(calib.T_cam_world))[:3, 3]
+    np.testing.assert_allclose(centre, [1.3, 0.0, 0.5], atol=1e-9)
+    assert calib.image_size == (480, 640)
+
+
+@pytest.mark.parametrize(
+    ("entry", "match"),
+    [
+        ({"T_cam_wrld": "x"}, r"rig\.json: cam_b: unknown field\(s\) \['T_cam_wrld'\]"),
+        ({"T_world_cam": "both"}, r"cam_b: give exactly one of 'T_cam_world'"),
+        ({"distortion": [0.1, 0.2, 0.3]}, r"cam_b\.distortion: expected 4, 5, 8, 12 or 14"),
+        ({"image_size": [32.0, 48]}, r"cam_b\.image_size"),
+        ({"meta": "notes"}, r"cam_b\.meta"),
+    ],
+)
+def test_bad_file_entries_name_camera_and_field(tmp_path, entry, match):
+    path = write(tmp_path / "rig.json", {"cam_b": {**sim_calibration("cam_b"), **entry}})
+    with pytest.raises(CalibrationError, match=match):
+        load_calibration_file(path)
+
+
+def test_bad_t_world_cam_is_reported_under_its_own_name(tmp_path):
+    data = sim_calibration("cam_b")
+    T = np.array(data.pop("T_cam_world"))
+    T[0, 0] = 3.0
+    path = write(tmp_path / "rig.json", {"cam_b": {**data, "T_world_cam": T.tolist()}})
+    with pytest.raises(CalibrationError, match=r"cam_b\.T_world_cam: rotation part is not orthonormal"):
+        load_calibration_file(path)
+
+
+def test_unreadable_files(tmp_path):
+    (tmp_path / "cv.yaml").write_text("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n")
+    with pytest.raises(CalibrationError, match="OpenCV FileStorage files are not supported"):
+        load_calibration_file(tmp_path / "cv.yaml")
+    (tmp_path / "broken.json").write_text("{not: [json")
+    with pytest.raises(CalibrationError, match=r"broken\.json: not valid JSON"):
+        load_calibration_file(tmp_path / "broken.json")
+    twice = {"cam_b": sim_calibration("cam_b"), "observation.images.cam_b": sim_calibration("cam_b")}
+    with pytest.raises(CalibrationError, match=r"observation\.images\.cam_b is given twice"):
+        load_calibration_file(write(tmp_path / "twice.json", twice))
+
+
+# --- attaching ---------------------------------------------------------------------------------------
+
+
+def test_attach_to_uncalibrated_dataset(dataset, tmp_path):
+    """The console script attaches a 2x-resolution calibration (K rescaled; one camera given by its
+    pose T_world_cam); LeRobot loads the dataset, OmniD takes the calibration, nothing else changed."""
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    before = digests(dataset)
+    original_info = (dataset / "meta" / "info.json").read_bytes()
+    high_res = (SIZE[0] * 2, SIZE[1] * 2)
+    cam_c = sim_calibration("cam_c", high_res)
+    cam_c["T_world_cam"] = np.linalg.inv(np.array(cam_c.pop("T_cam_world"))).tolist()
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(json.dumps({"cam_b": sim_calibration("cam_b", high_res), "cam_c": cam_c}))  # JSON is YAML
+
+    result = subprocess.run(
+        [BIN / "omnid-attach-calibration", "--root", dataset, "--calibration", rig],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "K rescaled from 96x64 to 48x32 px" in result.stdout
+    assert "attached the calibration of 2 camera(s)" in result.stdout
+
+    after = digests(dataset)
+    changed = {k for k in after if before.get(k) != after[k]}
+    assert changed == {"meta/info.json", "meta/info.json.bak"}, "only the metadata may change"
+    assert (dataset / "meta" / "info.json.bak").read_bytes() == original_info
+
+    meta = LeRobotDatasetMetadata(REPO_ID, root=dataset)
+    for cam in CAMS:
+        key = f"observation.images.{cam}"
+        calib = calibration_from_feature_info(key, meta.features[key])
+        expected = sim_calibration(cam)
+        assert calib.image_size == SIZE
+        np.testing.assert_allclose(calib.K, expected["K"], atol=1e-9)
+        np.testing.assert_allclose(calib.T_cam_world, expected["T_cam_world"], atol=1e-9)
+        assert meta.features[key]["info"]["video.height"] == SIZE[0]  # LeRobot's own entries kept
+        assert meta.features[key]["info"]["calibration_source"]["file"] == "rig.yaml"
+
+    item = LeRobotDataset(REPO_ID, root=dataset, video_backend="pyav")[0]
+    assert item["observation.images.cam_b"].shape == (3, *SIZE)
+
+    config = tiny_config(cams=CAMS, size=SIZE[0])
+    config.set_dataset_feature_metadata(meta.features)
+    config.validate_features()
+    assert sorted(config.camera_calibration) == [f"observation.images.{c}" for c in CAMS]
+    np.testing.assert_allclose(
+        config.camera_calibration["observation.images.cam_c"]["K"], sim_calibration("cam_c")["K"], atol=1e-9
+    )
+
+
+def _inverted(cam: str) -> dict:
+    data = sim_calibration(cam)
+    data["T_cam_world"] = np.linalg.inv(np.array(data["T_cam_world"])).tolist()
+    return data
+
+
+def _looking_away(cam: str) -> dict:
+    data = sim_calibration(cam)
+    flip = np.diag([-1.0, 1.0, -1.0, 1.0])  # turn the camera by 180 degrees about its y axis
+    data["T_cam_world"] = (flip @ np.array(data["T_cam_world"])).tolist()
+    return data
+
+
+def _in_millimetres(cam: str) -> dict:
+    data = sim_calibration(cam)
+    T = np.array(data["T_cam_world"])
+    T[:3, 3] *= 1000.0
+    data["T_cam_world"] = T.tolist()
+    return data
+
+
+def _with(cam: str, **changes) -> dict:
+    return {**sim_calibration(cam), **changes}
+
+
+def _skewed_rotation(cam: str) -> dict:
+    data = copy.deepcopy(sim_calibration(cam))
+    data["T_cam_world"][0][0] += 0.05
+    return data
+
+
+BAD_FILES = {
+    "missing camera": (
+        {"cam_b": sim_calibration("cam_b")},
+        r"observation\.images\.cam_c: no calibration in the file",
+    ),
+    "unknown camera": (
+        {**{c: sim_calibration(c) for c in CAMS}, "cam_z": sim_calibration("cam_b")},
+        r"observation\.images\.cam_z: in the calibration file but not an image feature",
+    ),
+    "swapped size": (
+        {"cam_b": _with("cam_b", image_size=[48, 32]), "cam_c": sim_calibration("cam_c")},
+        r"observation\.images\.cam_b\.image_size: \[48, 32\] is the dataset's .* swapped",
+    ),
+    "cropped size": (
+        {"cam_b": _with("cam_b", image_size=[48, 48]), "cam_c": sim_calibration("cam_c")},
+        r"observation\.images\.cam_b\.image_size: .*another aspect ratio",
+    ),
+    "not orthonormal": (
+        {"cam_b": _skewed_rotation("cam_b"), "cam_c": sim_calibration("cam_c")},
+        r"cam_b\.T_cam_world: rotation part is not orthonormal",
+    ),
+    "looking away": (
+        {"cam_b": sim_calibration("cam_b"), "cam_c": _looking_away("cam_c")},
+        r"observation\.images\.cam_c\.T_cam_world: the workspace volume's centre is behind the camera",
+    ),
+    "inverted": (
+        {"cam_b": _inverted("cam_b"), "cam_c": sim_calibration("cam_c")},
+        r"observation\.images\.cam_b\.T_cam_world: only .* of the workspace volume is in the image",
+    ),
+    "millimetres": (
+        {"cam_b": _in_millimetres("cam_b"), "cam_c": sim_calibration("cam_c")},
+        r"observation\.images\.cam_b\.T_cam_world: .*is the translation in metres\?",
+    ),
+    "distortion": (
+        {"cam_b": _with("cam_b", distortion=[0.1, -0.05, 0.0, 0.0, 0.0]), "cam_c": sim_calibration("cam_c")},
+        r"observation\.images\.cam_b\.distortion: non-zero \(moves pixels by up to [0-9.]+ px\)",
+    ),
+}
+
+
+def test_bad_files_leave_the_dataset_untouched(pristine, tmp_path, capsys):
+    """Every problem is reported (camera and field), nothing is written: one dataset serves all cases."""
+    before = digests(pristine)
+    for name, (data, match) in BAD_FILES.items():
+        path = write(tmp_path / f"{name.replace(' ', '_')}.json", data)
+        assert main(["--root", str(pristine), "--calibration", str(path)]) == 2, name
+        err = capsys.readouterr().err
+        assert re.search(match, err), f"{name}: {err}"
+        assert digests(pristine) == before, f"{name}: the dataset changed"
+    # Several problems at once are all listed.
+    both = write(tmp_path / "both.json", {"cam_b": _inverted("cam_b"), "cam_c": _looking_away("cam_c")})
+    assert main(["--root", str(pristine), "--calibration", str(both)]) == 2
+    err = capsys.readouterr().err
+    assert "nothing was written" in err and "cam_b.T_cam_world" in err and "cam_c.T_cam_world" in err
+
+
+def test_distortion_modes(dataset, tmp_path):
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    distortion = [0.1, -0.05, 0.001, 0.0, 0.0]
+    rig = write(tmp_path / "rig.json", {c: _with(c, distortion=distortion) for c in CAMS})
+    assert main(["--root", str(dataset), "--calibration", str(rig), "--distortion", "ignore"]) == 0
+    info = LeRobotDatasetMetadata(REPO_ID, root=dataset).features["observation.images.cam_b"]["info"]
+    assert info["calibration"]["distortion"] == distortion  # describes the raw frames
+    assert info["calibration_source"]["distortion"] == "ignore"
+    # Re-attaching the same file with another meaning of the distortion needs --overwrite.
+    args = ["--root", str(dataset), "--calibration", str(rig), "--distortion", "undistorted"]
+    assert main(args) == 2
+    assert main([*args, "--overwrite"]) == 0
+    info = LeRobotDatasetMetadata(REPO_ID, root=dataset).features["observation.images.cam_b"]["info"]
+    assert "distortion" not in info["calibration"]
+    assert info["calibration_source"]["notes"] == [
+        "frames already undistorted: distortion dropped",
+        "replaces the previous calibration",
+    ]
+
+
+def test_reattach_identical_is_allowed_and_dry_run_writes_nothing(dataset, tmp_path, capsys):
+    rig = write(tmp_path / "rig.json", {c: sim_calibration(c) for c in CAMS})
+    before = digests(dataset)
+    assert main(["--root", str(dataset), "--calibration", str(rig), "--dry-run"]) == 0
+    assert "nothing written" in capsys.readouterr().out
+    assert digests(dataset) == before
+    assert main(["--root", str(dataset), "--calibration", str(rig), "--no-backup"]) == 0
+    assert main(["--root", str(dataset), "--calibration", str(rig), "--no-backup"]) == 0
+    assert not (dataset / "meta" / "info.json.bak").exists()
+    assert sorted(p.name for p in (dataset / "meta").iterdir()) == sorted(
+        p.name for p in (dataset / "meta").iterdir() if not p.name.startswith(".")
+    ), "no temporary files left in meta/"
+
+
+def test_skip_camera_then_train_on_the_others(dataset, tmp_path):
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    rig = write(tmp_path / "rig.json", {"cam_b": sim_calibration("cam_b")})
+    assert main(["--root", str(dataset), "--calibration", str(rig), "--skip-camera", "cam_c"]) == 0
+    features = LeRobotDatasetMetadata(REPO_ID, root=dataset).features
+    assert "calibration" not in (features["observation.images.cam_c"].get("info") or {})
+    config = tiny_config(cams=CAMS, size=SIZE[0], cameras=["cam_b"])
+    config.set_dataset_feature_metadata(features)
+    assert list(config.camera_calibration) == ["observation.images.cam_b"]
+    with pytest.raises(CalibrationError, match=r"observation\.images\.cam_c: no camera calibration"):
+        tiny_config(cams=CAMS, size=SIZE[0]).set_dataset_feature_metadata(features)
+
+
+def test_volume_bounds_options(pristine, tmp_path, capsys):
+    rig = write(tmp_path / "rig.json", {c: sim_calibration(c) for c in CAMS})
+    far = ["--volume-bounds", "5", "6", "5", "6", "0", "1"]
+    assert main(["--root", str(pristine), "--calibration", str(rig), "--dry-run", *far]) == 2
+    assert "volume bounds [[5.0, 6.0], [5.0, 6.0], [0.0, 1.0]]" in capsys.readouterr().err
+    config = write(
+        tmp_path / "config.json", {"type": "omnid", "volume_bounds": [[0.3, 0.8], [-0.3, 0.3], [0, 0.3]]}
+    )
+    assert (
+        main(
+            ["--root", str(pristine), "--calibration", str(rig), "--dry-run", "--policy-config", str(config)]
+        )
+        == 0
+    )
+    bad = write(tmp_path / "bad.json", {"policy": {"volume_bounds": [[1, 0], [0, 1], [0, 1]]}})
+    assert main(["--root", str(pristine), "--calibration", str(rig), "--policy-config", str(bad)]) == 2
+    assert "min < max" in capsys.readouterr().err
+
+
+def test_hub_repo_id(monkeypatch, tmp_path, pristine, capsys):
+    """Without --root the dataset comes from LeRobot's cache, else from the Hub; offline is a clear error."""
+    import huggingface_hub
+    import lerobot.utils.constants
+
+    monkeypatch.setattr(lerobot.utils.constants, "HF_LEROBOT_HOME", tmp_path / "cache")
+
+    def offline(*args, **kwargs):
+        raise huggingface_hub.errors.LocalEntryNotFoundError("no connection")
+
+    monkeypatch.setattr(huggingface_hub, "snapshot_download", offline)
+    rig = write(tmp_path / "rig.json", {c: sim_calibration(c) for c in CAMS})
+    assert main(["--repo-id", "someone/dataset", "--calibration", str(rig)]) == 2
+    err = capsys.readouterr().err
+    assert "--repo-id someone/dataset: could not download the dataset from the Hub" in err
+    assert "pass --root" in err
+    shutil.copytree(pristine, tmp_path / "cache" / "someone" / "dataset")
+    assert main(["--repo-id", "someone/dataset", "--calibration", str(rig), "--dry-run"]) == 0
+    assert main(["--calibration", str(rig)]) == 2
+    assert "give --root" in capsys.readouterr().err
