@@ -126,7 +126,7 @@ def train_command(
         "--policy.type=omnid",
         f"--policy.device={device}",
         "--policy.push_to_hub=false",
-        f"--policy.cameras=[{','.join(cameras)}]",
+        "--policy.cameras=" + json.dumps(list(cameras)),
         *profile.policy_flags,
         "--env.type=omnid",
         f"--env.task={task}",

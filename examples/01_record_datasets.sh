@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Step 1: record LeRobot datasets with the scripted expert: select_apple seen by cameras B-E (training),
+# and small camera-A sets of select_apple and select_chemistry_tube (few-shot fine-tuning on a new view).
+set -euo pipefail
+source "$(dirname "$0")/_config.sh"
+
+record() {  # root, then omnid-record options; a dataset that exists is kept
+  local root=$1; shift
+  [ -f "$root/meta/info.json" ] || omnid-record --image-size "$IMAGE_SIZE" --root "$root" --repo-id "local/$(basename "$root")" "$@"
+}
+record "$OUT/data/select_apple_bcde" --task select_apple --episodes "$EPISODES" --cameras cam_b,cam_c,cam_d,cam_e
+# Other seeds than the training set's, so the few-shot sets are new episodes.
+record "$OUT/data/select_apple_a" --task select_apple --episodes "$FEWSHOT_EPISODES" --cameras cam_a --seed 100000
+record "$OUT/data/select_chemistry_tube_a" --task select_chemistry_tube --episodes "$FEWSHOT_EPISODES" \
+  --cameras cam_a --seed 100000

@@ -1,0 +1,134 @@
+"""The user workflow, run as a user runs it: the example scripts in order, at tiny sizes (slow)."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from lerobot_omnid.modeling_omnid import OmniDPolicy
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+FAKE_HUB = Path(__file__).parent / "fake_hub"
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def workflow_env(tmp_path_factory):
+    out = tmp_path_factory.mktemp("workflow")
+    env = dict(os.environ)
+    env.update(
+        OUT=str(out), EPISODES="2", FEWSHOT_EPISODES="2", IMAGE_SIZE="64", STEPS="2", FINETUNE_STEPS="2",
+        BATCH_SIZE="2", EVAL_EPISODES="1", EPISODE_LENGTH="10", NUM_WORKERS="0",
+        PATH=f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}",
+    )  # fmt: skip
+    return out, env
+
+
+def run_example(name: str, env: dict) -> str:
+    result = subprocess.run(
+        ["bash", str(EXAMPLES / name)], env=env, capture_output=True, text=True, timeout=900
+    )
+    assert result.returncode == 0, f"{name} failed:\n{result.stdout[-2000:]}\n{result.stderr[-4000:]}"
+    return result.stdout + result.stderr
+
+
+def success_info(eval_dir: Path) -> dict:
+    info = json.loads((eval_dir / "eval_info.json").read_text())["overall"]
+    assert info["n_episodes"] == 1 and info["video_paths"] and Path(info["video_paths"][0]).is_file()
+    return info
+
+
+def test_record_train_evaluate(workflow_env):
+    out, env = workflow_env
+    run_example("01_record_datasets.sh", env)
+    for name in ("select_apple_bcde", "select_apple_a", "select_chemistry_tube_a"):
+        assert (out / "data" / name / "meta" / "info.json").is_file()
+    log = run_example("02_train_omnid.sh", env)
+    assert "Eval policy" in log or "eval" in log.lower()
+    checkpoint = out / "train_bcde" / "checkpoints" / "last" / "pretrained_model"
+    assert OmniDPolicy.from_pretrained(checkpoint).camera_keys == [
+        f"observation.images.cam_{c}" for c in "bcde"
+    ]
+    run_example("03_evaluate.sh", env)
+    for setting in ("id_id", "position_ood_id", "id_ood1"):
+        success_info(out / f"eval_bcde_{setting}")
+
+
+def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(workflow_env):
+    out, env = workflow_env
+    run_example("04_finetune_camera_a.sh", env)
+    base = OmniDPolicy.from_pretrained(out / "train_bcde" / "checkpoints" / "last" / "pretrained_model")
+    for task in ("select_apple", "select_chemistry_tube"):
+        tuned = OmniDPolicy.from_pretrained(
+            out / f"finetune_a_{task}" / "checkpoints" / "last" / "pretrained_model"
+        )
+        assert tuned.camera_keys == ["observation.images.cam_a"]
+        dataset_info = json.loads((out / "data" / f"{task}_a" / "meta" / "info.json").read_text())
+        expected = dataset_info["features"]["observation.images.cam_a"]["info"]["calibration"]
+        assert tuned.config.camera_calibration == {"observation.images.cam_a": expected}
+        # Fine-tuned from the checkpoint: two small steps leave the weights close to the base, not random.
+        base_w = base.model.ofg.query_embed
+        tuned_w = tuned.model.ofg.query_embed
+        assert (tuned_w - base_w).abs().max() < 1e-2
+        stats = json.loads((out / "data" / f"{task}_a" / "meta" / "stats.json").read_text())["action"]
+        from safetensors.torch import load_file
+
+        norm = load_file(
+            next(
+                (out / f"finetune_a_{task}" / "checkpoints" / "last" / "pretrained_model").glob(
+                    "policy_preprocessor_step_*_normalizer_processor.safetensors"
+                )
+            )
+        )
+        assert norm["action.max"].tolist() == pytest.approx(stats["max"], rel=1e-5)
+        success_info(out / f"eval_finetune_a_{task}")
+
+
+def test_evaluate_on_a_camera_subset(workflow_env):
+    out, env = workflow_env
+    run_example("05_eval_camera_subset.sh", env)
+    success_info(out / "eval_bcde_on_bc")
+
+
+def test_push_to_hub_folder_card_and_reload_in_fresh_process(workflow_env, tmp_path):
+    _, env = workflow_env
+    hub = tmp_path / "hub"
+    env = dict(env, HUB_REPO_ID="someone/omnid_select_apple", OMNID_FAKE_HUB_DIR=str(hub),
+               PYTHONPATH=f"{FAKE_HUB}{os.pathsep}{env.get('PYTHONPATH', '')}")  # fmt: skip
+    run_example("06_push_to_hub.sh", env)
+    pushed = hub / "someone" / "omnid_select_apple"
+    for name in (
+        "model.safetensors",
+        "config.json",
+        "train_config.json",
+        "README.md",
+        "policy_preprocessor.json",
+    ):
+        assert (pushed / name).is_file(), name
+    card = (pushed / "README.md").read_text()
+    assert "## OmniD: cameras and calibration" in card and "`observation.images.cam_e`" in card
+    assert "local/select_apple_bcde" in card
+    # A fresh process loads the pushed folder and evaluates it.
+    result = subprocess.run(
+        [str(Path(sys.executable).parent / "lerobot-eval"), f"--policy.path={pushed}", "--policy.device=cpu",
+         "--env.type=omnid", "--env.task=select_apple", "--env.cameras=[cam_b,cam_c,cam_d,cam_e]",
+         "--env.image_size=64", "--env.episode_length=10", "--eval.n_episodes=1", "--eval.batch_size=1",
+         f"--output_dir={tmp_path / 'eval_pushed'}"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    success_info(tmp_path / "eval_pushed")
+
+
+def test_accelerate_two_processes(workflow_env):
+    out, env = workflow_env
+    log = run_example("07_accelerate_two_processes.sh", env)
+    assert "Effective batch size: 2 x 2 = 4" in log
+    assert (
+        out / "train_bcde_2proc" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors"
+    ).is_file()
