@@ -82,8 +82,9 @@ def _parse_yaml(text: str, path: Path, also: str = "") -> Any:
         ) from e
 
 
-def _read_mapping(path: Path) -> dict[str, Any]:
-    """Parse the file (JSON or YAML) into its top-level mapping; errors name the file."""
+def read_mapping_file(path: Path) -> dict[str, Any]:
+    """Parse a JSON or YAML file (chosen as for calibration files) into its top-level mapping; errors
+    name the file."""
     if not path.is_file():
         raise CalibrationError(f"calibration file {path} does not exist")
     text = path.read_text()
@@ -168,7 +169,7 @@ def load_calibration_file(path: str | Path) -> dict[str, CameraCalibration]:
     """
     path = Path(path)
     calibrations: dict[str, CameraCalibration] = {}
-    for cam, entry in _read_mapping(path).items():
+    for cam, entry in read_mapping_file(path).items():
         key = image_key(str(cam))
         if key in calibrations:
             raise CalibrationError(f"calibration file {path}: camera {key} is given twice ('{cam}')")
@@ -178,7 +179,7 @@ def load_calibration_file(path: str | Path) -> dict[str, CameraCalibration]:
 
 def load_calibration_meta(path: str | Path) -> dict[str, dict[str, Any]]:
     """The ``meta`` notes of every camera that has some, keyed by image feature key."""
-    data = _read_mapping(Path(path))
+    data = read_mapping_file(Path(path))
     return {
         image_key(str(cam)): dict(entry["meta"])
         for cam, entry in data.items()

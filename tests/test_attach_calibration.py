@@ -27,7 +27,7 @@ from lerobot_omnid.calibration_file import load_calibration_file, load_calibrati
 
 REPO_ID = "local/uncalibrated"
 CAMS = ("cam_b", "cam_c")
-SIZE = (32, 48)  # (height, width) stored in the dataset: not square, so swapped sizes are caught
+SIZE = (36, 48)  # (height, width) in the dataset: 4:3 like 640x480, not square (swapped sizes are caught)
 BIN = Path(sys.executable).parent
 
 
@@ -199,7 +199,7 @@ def test_attach_to_uncalibrated_dataset(dataset, tmp_path):
         timeout=300,
     )
     assert result.returncode == 0, result.stderr
-    assert "K rescaled from 96x64 to 48x32 px" in result.stdout
+    assert "K rescaled from 96x72 to 48x36 px" in result.stdout
     assert "attached the calibration of 2 camera(s)" in result.stdout
 
     after = digests(dataset)
@@ -271,8 +271,8 @@ BAD_FILES = {
         r"observation\.images\.cam_z: in the calibration file but not an image feature",
     ),
     "swapped size": (
-        {"cam_b": _with("cam_b", image_size=[48, 32]), "cam_c": sim_calibration("cam_c")},
-        r"observation\.images\.cam_b\.image_size: \[48, 32\] is the dataset's .* swapped",
+        {"cam_b": _with("cam_b", image_size=[48, 36]), "cam_c": sim_calibration("cam_c")},
+        r"observation\.images\.cam_b\.image_size: \[48, 36\] is the dataset's .* swapped",
     ),
     "cropped size": (
         {"cam_b": _with("cam_b", image_size=[48, 48]), "cam_c": sim_calibration("cam_c")},
