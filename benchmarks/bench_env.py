@@ -20,7 +20,7 @@ import time
 import gym_omnid
 import gymnasium as gym
 import numpy as np
-from gym_omnid.experts import make_expert
+from gym_omnid.experts import make_expert, run_expert_episode
 from tqdm import tqdm
 
 CHEAP_OBS = {"cameras": ["cam_a"], "image_size": 32}
@@ -48,17 +48,6 @@ def time_steps(task: str, steps: int, image_size: int, seed: int) -> list[float]
     return durations
 
 
-def run_episode(env: gym.Env, seed: int) -> tuple[bool, int]:
-    """One seeded expert episode: (success, env steps taken)."""
-    env.reset(seed=seed)
-    expert = make_expert(env.unwrapped)
-    for step in range(1, gym_omnid.MAX_EPISODE_STEPS + 1):
-        _, _, terminated, truncated, info = env.step(expert.act())
-        if terminated or truncated:
-            return bool(info["is_success"]), step
-    return False, gym_omnid.MAX_EPISODE_STEPS
-
-
 def success_rate(
     task: str, layout: str, episodes: int, seed0: int, obs_kwargs: dict
 ) -> tuple[float, float, float]:
@@ -66,7 +55,7 @@ def success_rate(
     env = gym.make(f"gym_omnid/{task}", layout=layout, **obs_kwargs)
     try:
         results = [
-            run_episode(env, seed)
+            run_expert_episode(env, seed)
             for seed in tqdm(range(seed0, seed0 + episodes), desc=f"{task}/{layout}", leave=False)
         ]
     finally:

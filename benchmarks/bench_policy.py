@@ -165,7 +165,9 @@ def measure(name: str, profile_name: str, device: str, repeats: int, queue: mp.Q
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--profile", choices=sorted(PROFILES), default="cpu")
     parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     parser.add_argument("--repeats", type=int, default=3, help="measured repetitions after one warm-up")
@@ -194,8 +196,8 @@ def main() -> None:
     print(header)
     for r in results:
         print(
-            f"{r['policy']:<10} {r['params_M']:>8.1f}M {r['train_step_s']:>10.3f}s {r['select_action_s']:>13.3f}s "
-            f"{r['train_peak_MiB']:>11.0f} MiB"
+            f"{r['policy']:<10} {r['params_M']:>8.1f}M {r['train_step_s']:>10.3f}s "
+            f"{r['select_action_s']:>13.3f}s {r['train_peak_MiB']:>11.0f} MiB"
         )
     if len(results) == 2:
         a, b = results

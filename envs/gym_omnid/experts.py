@@ -19,8 +19,10 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
+import gymnasium as gym
 import numpy as np
 
+from gym_omnid.constants import MAX_EPISODE_STEPS
 from gym_omnid.robot import FINGER_TIP_BEYOND_TCP
 from gym_omnid.rotations import rot6d_from_matrix, topdown_rotation
 from gym_omnid.tasks.select_apple import APPLE_RADIUS, BOWL_BASE_THICKNESS
@@ -193,3 +195,15 @@ def make_expert(env: OmniDEnv) -> ScriptedExpert:
     start = Waypoint("start", tuple(float(v) for v in tcp_xyz), GRASP_YAW, OPEN, 1)
     plan = PLANNERS[env.task](env, start)
     return ScriptedExpert(start, plan)
+
+
+def run_expert_episode(env: gym.Env, seed: int, max_steps: int = MAX_EPISODE_STEPS) -> tuple[bool, int]:
+    """Reset ``env`` (a gymnasium env, wrapped or not) with ``seed`` and run the expert until the episode
+    ends; returns (success, env steps taken)."""
+    env.reset(seed=seed)
+    expert = make_expert(env.unwrapped)
+    for step in range(1, max_steps + 1):
+        _, _, terminated, truncated, info = env.step(expert.act())
+        if terminated or truncated:
+            return bool(info["is_success"]), step
+    return False, max_steps

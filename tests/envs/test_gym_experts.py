@@ -6,7 +6,7 @@ import gym_omnid
 import gymnasium as gym
 import numpy as np
 import pytest
-from gym_omnid.experts import Waypoint, interpolate, make_expert, plan_length
+from gym_omnid.experts import Waypoint, interpolate, make_expert, plan_length, run_expert_episode
 from gym_omnid.rotations import matrix_from_rot6d, topdown_rotation
 
 FAST_SEEDS = (0, 1, 2)
@@ -28,24 +28,13 @@ def test_interpolate_is_piecewise_linear_and_holds_the_end() -> None:
     assert interpolate(start, plan, 0).dtype == np.float32
 
 
-def _run_episode(env: gym.Env, seed: int) -> tuple[bool, int]:
-    """Run the expert for one seeded episode; (success, steps)."""
-    env.reset(seed=seed)
-    expert = make_expert(env.unwrapped)
-    for step in range(1, gym_omnid.MAX_EPISODE_STEPS + 1):
-        _, _, terminated, truncated, info = env.step(expert.act())
-        if terminated or truncated:
-            return bool(info["is_success"]), step
-    return False, gym_omnid.MAX_EPISODE_STEPS
-
-
 @pytest.mark.parametrize("layout", gym_omnid.LAYOUTS)
 @pytest.mark.parametrize("task", gym_omnid.TASKS)
 def test_expert_succeeds_fast(task: str, layout: str) -> None:
     env = gym.make(f"gym_omnid/{task}", layout=layout, cameras=["cam_a"], image_size=32)
     try:
         for seed in FAST_SEEDS:
-            success, steps = _run_episode(env, seed)
+            success, steps = run_expert_episode(env, seed)
             assert success, f"{task}/{layout} seed {seed} failed"
             assert steps < gym_omnid.MAX_EPISODE_STEPS // 2
     finally:
@@ -68,7 +57,7 @@ def test_expert_success_rate(task: str, layout: str) -> None:
     """>= 95 % over 100 seeded episodes (seeds 1000..1099, disjoint from the fast test's)."""
     env = gym.make(f"gym_omnid/{task}", layout=layout, cameras=["cam_a"], image_size=32)
     try:
-        successes = sum(_run_episode(env, 1000 + i)[0] for i in range(SLOW_EPISODES))
+        successes = sum(run_expert_episode(env, 1000 + i)[0] for i in range(SLOW_EPISODES))
     finally:
         env.close()
     assert successes / SLOW_EPISODES >= MIN_SUCCESS_RATE
