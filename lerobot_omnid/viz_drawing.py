@@ -19,8 +19,11 @@ from pathlib import Path
 import numpy as np
 import torch
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
+from matplotlib.patheffects import withStroke
 from torch import Tensor
 
 from lerobot_omnid.geometry import AXES, FeatureVolume, project_to_grid
@@ -28,11 +31,13 @@ from lerobot_omnid.omni_feature_generator import OFGOutput
 
 ANCHOR_CMAP = "viridis"  # anchors coloured by height
 WEIGHT_CMAP = "autumn"  # the chosen query's samples coloured by attention weight
-BEV_CMAP = "inferno"  # a non-negative map (norm over several compressed channels)
+BEV_CMAP = "inferno"  # a map without negative values, from its minimum to its maximum
 BEV_SIGNED_CMAP = "RdBu_r"  # a signed map (one compressed channel), centred on 0
 OBJECT_COLOR = "cyan"
 QUERY_COLOR = "lime"
+OUTLINE = [withStroke(linewidth=2.0, foreground="black")]  # keeps light marks readable on any image
 PANEL_INCHES = 3.2  # side of one camera panel
+BEV_SCALE = 1.3  # height of the BEV row relative to the camera row
 ANCHOR_SIZE = 5.0  # points^2: marker area of an anchor
 SAMPLE_MAX_SIZE = 60.0  # points^2: marker area of the heaviest sample
 SAMPLE_MIN_SIZE = 4.0
@@ -240,27 +245,28 @@ def draw_frame(frame: FrameData, volume: FeatureVolume, dpi: int = 100) -> Figur
     """One figure: a panel per camera, the BEV heatmap and the attention share per camera."""
     cams = list(frame.images)
     ncols = max(len(cams), 2)
-    fig = Figure(figsize=(PANEL_INCHES * ncols + 1.0, PANEL_INCHES * 2 + 0.8), dpi=dpi)
+    fig = Figure(figsize=(PANEL_INCHES * ncols + 1.0, PANEL_INCHES * (1 + BEV_SCALE) + 0.8), dpi=dpi)
     FigureCanvasAgg(fig)
     grid = fig.add_gridspec(
-        2, ncols + 1, width_ratios=[1] * ncols + [0.06], left=0.03, right=0.93, top=0.9, bottom=0.08,
-        hspace=0.28, wspace=0.22,
+        2, ncols + 1, width_ratios=[1] * ncols + [0.06], height_ratios=[1, BEV_SCALE], left=0.03, right=0.93,
+        top=0.91, bottom=0.07, hspace=0.22, wspace=0.22,
     )  # fmt: skip
     fig.suptitle(frame.title, fontsize=11)
     z_lo, z_hi = volume.bounds[2]
     w_max = max(float(frame.sample_weight.max()), 1e-12)
+    weight_colors = ScalarMappable(Normalize(0.0, w_max), WEIGHT_CMAP)
     for s, cam in enumerate(cams):
         ax = fig.add_subplot(grid[0, s])
         ax.imshow(frame.images[cam])
         vis = frame.anchor_visible[s]
         anchors = ax.scatter(*frame.anchor_uv[s, vis].T, c=frame.anchor_height[vis], cmap=ANCHOR_CMAP,
                              vmin=z_lo, vmax=z_hi, s=ANCHOR_SIZE, alpha=0.8, linewidths=0)  # fmt: skip
-        ax.plot(*frame.query_uv[s, frame.query_visible[s]].T, color="white", lw=1.0, alpha=0.9)
+        ax.plot(*frame.query_uv[s, frame.query_visible[s]].T, color="white", lw=1.0, path_effects=OUTLINE)
         sel = frame.sample_weight[s] > 0
         w = frame.sample_weight[s, sel]
-        samples = ax.scatter(*frame.sample_uv[s, sel].T, c=w, cmap=WEIGHT_CMAP, vmin=0, vmax=w_max,
-                             s=SAMPLE_MIN_SIZE + SAMPLE_MAX_SIZE * w / w_max, edgecolors="black",
-                             linewidths=0.5)  # fmt: skip
+        # Hollow rings, so that the object under the query stays visible.
+        ax.scatter(*frame.sample_uv[s, sel].T, s=SAMPLE_MIN_SIZE + SAMPLE_MAX_SIZE * w / w_max,
+                   facecolors="none", edgecolors=weight_colors.to_rgba(w), linewidths=1.2)  # fmt: skip
         for k in range(len(frame.objects)):
             if frame.objects_visible[s, k]:
                 ax.plot(*frame.objects_uv[s, k], marker="+", color=OBJECT_COLOR, ms=8, mew=1.5)
@@ -269,10 +275,10 @@ def draw_frame(frame: FrameData, volume: FeatureVolume, dpi: int = 100) -> Figur
         ax.set_title(f"{cam}: {100 * frame.share_all[s]:.0f}% of attention", fontsize=9)
     bars = grid[0, ncols].subgridspec(2, 1, hspace=0.5)
     fig.colorbar(anchors, cax=fig.add_subplot(bars[0])).set_label("anchor height z (m)", fontsize=8)
-    fig.colorbar(samples, cax=fig.add_subplot(bars[1])).set_label(
+    fig.colorbar(weight_colors, cax=fig.add_subplot(bars[1])).set_label(
         f"query {frame.query}\nsample weight", fontsize=8
     )
-    split = (ncols + 1) // 2
+    split = ncols - 1  # the bar chart takes one column
     _draw_bev(fig.add_subplot(grid[1, :split]), frame, volume)
     _draw_share(fig.add_subplot(grid[1, split:ncols]), frame, cams)
     return fig
@@ -283,7 +289,7 @@ def _draw_bev(ax, frame: FrameData, volume: FeatureVolume) -> None:
     heat = view.image(frame.heat, volume)
     limit = max(float(np.abs(heat).max()), 1e-12)
     signed = bool(heat.min() < 0)
-    cmap, vmin = (BEV_SIGNED_CMAP, -limit) if signed else (BEV_CMAP, 0.0)
+    cmap, vmin = (BEV_SIGNED_CMAP, -limit) if signed else (BEV_CMAP, float(heat.min()))
     im = ax.imshow(heat, origin="lower", extent=view.extent(volume), interpolation="nearest", aspect="equal",
                    cmap=cmap, vmin=vmin, vmax=limit)  # fmt: skip
     ax.figure.colorbar(im, ax=ax, fraction=0.05, pad=0.03).set_label(frame.heat_label, fontsize=8)
@@ -294,7 +300,7 @@ def _draw_bev(ax, frame: FrameData, volume: FeatureVolume) -> None:
     for name, xyz in frame.objects.items():
         ax.plot(xyz[view.across], xyz[view.up], marker="+", color=OBJECT_COLOR, ms=10, mew=2)
         ax.annotate(name, (xyz[view.across], xyz[view.up]), xytext=(4, 3), textcoords="offset points",
-                    color=OBJECT_COLOR, fontsize=8)  # fmt: skip
+                    color=OBJECT_COLOR, fontsize=8, path_effects=OUTLINE)  # fmt: skip
     if view.flip_across:
         ax.invert_xaxis()
     ax.set_xlabel(f"{AXES[view.across]} (m)" + (", left ←" if view.flip_across else ""), fontsize=9)
