@@ -195,6 +195,8 @@ def _check_camera(
             return None
         calib = rescale_calibration(calib, size)
         notes.append(f"K rescaled from {fw}x{fh} to {dw}x{dh} px")
+    if calib.distortion and not any(calib.distortion):
+        calib = CameraCalibration(calib.K, calib.T_cam_world, calib.image_size, ())  # all zero: none
     shift = max_distortion_shift_px(calib)
     if shift > 0.0:
         if distortion_mode == "refuse":

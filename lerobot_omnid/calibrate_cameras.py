@@ -222,7 +222,8 @@ def detect_board(image: np.ndarray, board: BoardSpec) -> BoardDetection | None:
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """``K`` (3, 3), OpenCV ``distortion`` (5,), reprojection RMS over all views and per view (px)."""
+    """``K`` (3, 3), OpenCV ``distortion`` (5,) or (0,) for a pinhole fit, reprojection RMS over all views
+    and per view (px)."""
 
     K: np.ndarray
     distortion: np.ndarray
@@ -259,7 +260,7 @@ def calibrate_intrinsics(detections: Sequence[BoardDetection], pinhole: bool = F
     for obj, img, rvec, tvec in zip(object_points, image_points, rvecs, tvecs, strict=True):
         proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
         view_rms.append(float(np.sqrt(np.mean(np.sum((proj - img) ** 2, axis=-1)))))
-    return Intrinsics(K, np.zeros(5) if pinhole else dist.ravel()[:5], float(rms), tuple(view_rms))
+    return Intrinsics(K, np.zeros(0) if pinhole else dist.ravel()[:5], float(rms), tuple(view_rms))
 
 
 def estimate_cam_T_world(
@@ -410,7 +411,7 @@ def calibrate_camera(
             )
     else:
         K, image_size = np.asarray(intrinsics.K), intrinsics.image_size
-        distortion = np.asarray(intrinsics.distortion or np.zeros(5))
+        distortion = np.asarray(intrinsics.distortion, np.float64)
         meta["intrinsics"] = "reused"
     detection = detect_board(_read_image(extrinsics_image), board)
     if detection is None:

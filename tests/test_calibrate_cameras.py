@@ -11,6 +11,7 @@ point 1.3 px, centre 3.5 mm, rotation 0.18 deg.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -158,11 +159,10 @@ def env_truth() -> dict[str, dict]:
         env.close()
 
 
-@pytest.fixture(scope="module", params=[CHECKERBOARD, CHARUCO], ids=["checkerboard", "charuco"])
-def renders(request, tmp_path_factory, env_truth):
-    """Per camera: the intrinsics images (glob) and the image of the board lying on the table."""
-    board: BoardSpec = request.param
-    folder = tmp_path_factory.mktemp(board.kind)
+def render_board_views(
+    board: BoardSpec, folder: Path, env_truth: dict[str, dict]
+) -> dict[str, tuple[str, str]]:
+    """Per camera: a glob of the intrinsics images and the image of the board lying on the table."""
     scene = BoardScene(board, folder / "texture.png")
     try:
         images = {}
@@ -178,7 +178,20 @@ def renders(request, tmp_path_factory, env_truth):
             images[cam] = (str(folder / f"{cam}_view*.png"), str(folder / f"{cam}_on_table.png"))
     finally:
         scene.close()
-    return board, images
+    return images
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory, env_truth):
+    """``renders(board)``: the rendered images of ``board`` (made once per module)."""
+    cache: dict[str, dict[str, tuple[str, str]]] = {}
+
+    def get(board: BoardSpec) -> dict[str, tuple[str, str]]:
+        if board.kind not in cache:
+            cache[board.kind] = render_board_views(board, tmp_path_factory.mktemp(board.kind), env_truth)
+        return cache[board.kind]
+
+    return get
 
 
 def calibrate_args(board: BoardSpec, cam: str, images: tuple[str, str], output: Path) -> list[str]:
@@ -209,9 +222,10 @@ def pose_errors(cam_T_world: np.ndarray, truth: np.ndarray) -> tuple[float, floa
     return float(np.linalg.norm(centre - centre_truth)), angle
 
 
-def test_calibration_matches_the_env_cameras(renders, env_truth, tmp_path, capsys):
+@pytest.mark.parametrize("board", [CHECKERBOARD, CHARUCO], ids=["checkerboard", "charuco"])
+def test_calibration_matches_the_env_cameras(board, renders, env_truth, tmp_path, capsys):
     """All five cameras through the CLI into one YAML file, compared with the env's calibration."""
-    board, images = renders
+    images = renders(board)
     output = tmp_path / "rig.yaml"
     for cam in CAMERAS:
         assert main(calibrate_args(board, cam, images[cam], output)) == 0, capsys.readouterr().err
@@ -242,9 +256,8 @@ def test_calibration_matches_the_env_cameras(renders, env_truth, tmp_path, capsy
 def test_pinhole_calibration_attached_to_a_lower_resolution_dataset(renders, env_truth, tmp_path):
     """Record with LeRobot (here: a dataset without calibration at 48x36), calibrate at 640x480 with a
     pinhole model, attach (K rescaled): the dataset then carries the env's calibration at its size."""
-    board, images = renders
-    if board.kind != "checkerboard":
-        pytest.skip("one board is enough for the end-to-end path")
+    board = CHECKERBOARD
+    images = renders(board)
     output = tmp_path / "rig.json"
     for cam in CAMS:
         assert main([*calibrate_args(board, cam, images[cam], output), "--pinhole"]) == 0
@@ -350,9 +363,8 @@ def test_bad_input_is_named(tmp_path, capsys):
 
 def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path):
     """``--intrinsics-from`` reuses K and distortion; only the board image at the known pose is needed."""
-    board, images = renders
-    if board.kind != "charuco":
-        pytest.skip("one board is enough")
+    board = CHARUCO
+    images = renders(board)
     first = tmp_path / "first.yaml"
     assert main(calibrate_args(board, "cam_b", images["cam_b"], first)) == 0
     moved = tmp_path / "moved.yaml"
@@ -371,3 +383,29 @@ def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path):
         np.asarray(calib[key].T_cam_world), env_truth["cam_b"]["T_cam_world"]
     )
     assert position_err < POSITION_TOL_M and rotation_err < ROTATION_TOL_DEG
+
+
+def test_readme_walkthrough_commands_parse():
+    """The commands of the README's "bring your own robot" section are valid for our parsers."""
+    import shlex
+
+    from lerobot_omnid import attach_calibration, calibrate_cameras
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    section = readme.split("## Bring your own robot")[1].split("\n## ")[0]
+    parsers = {
+        "omnid-calibrate": calibrate_cameras.build_parser,
+        "omnid-attach-calibration": attach_calibration.build_parser,
+    }
+    blocks = re.findall(r"```(bash|python)\n(.*?)```", section, flags=re.S)
+    checked = 0
+    for language, block in blocks:
+        if language == "python":
+            compile(block, "README", "exec")
+            continue
+        for command in block.replace("\\\n", " ").splitlines():
+            words = shlex.split(command)
+            if words and words[0] in parsers:
+                parsers[words[0]]().parse_args(words[1:])
+                checked += 1
+    assert checked >= 4
