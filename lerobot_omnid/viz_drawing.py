@@ -34,6 +34,7 @@ WEIGHT_CMAP = "autumn"  # the chosen query's samples coloured by attention weigh
 BEV_CMAP = "inferno"  # a map without negative values, from its minimum to its maximum
 BEV_SIGNED_CMAP = "RdBu_r"  # a signed map (one compressed channel), centred on 0
 OBJECT_COLOR = "cyan"
+LABEL_SPACING = 0.15  # object names closer than this share of the volume's extent to a named one are left out
 QUERY_COLOR = "lime"
 OUTLINE = [withStroke(linewidth=2.0, foreground="black")]  # keeps light marks readable on any image
 PANEL_INCHES = 3.2  # side of one camera panel
@@ -245,11 +246,13 @@ def draw_frame(frame: FrameData, volume: FeatureVolume, dpi: int = 100) -> Figur
     """One figure: a panel per camera, the BEV heatmap and the attention share per camera."""
     cams = list(frame.images)
     ncols = max(len(cams), 2)
-    fig = Figure(figsize=(PANEL_INCHES * ncols + 1.0, PANEL_INCHES * (1 + BEV_SCALE) + 0.8), dpi=dpi)
+    width = PANEL_INCHES * ncols + 1.0
+    fig = Figure(figsize=(width, PANEL_INCHES * (1 + BEV_SCALE) + 0.8), dpi=dpi)
     FigureCanvasAgg(fig)
+    # Margins in inches, so that colour bar labels fit whatever the number of cameras.
     grid = fig.add_gridspec(
-        2, ncols + 1, width_ratios=[1] * ncols + [0.06], height_ratios=[1, BEV_SCALE], left=0.03, right=0.93,
-        top=0.91, bottom=0.07, hspace=0.22, wspace=0.22,
+        2, ncols + 1, width_ratios=[1] * ncols + [0.06], height_ratios=[1, BEV_SCALE], left=0.3 / width,
+        right=1 - 0.75 / width, top=0.91, bottom=0.07, hspace=0.22, wspace=0.22,
     )  # fmt: skip
     fig.suptitle(frame.title, fontsize=11)
     z_lo, z_hi = volume.bounds[2]
@@ -275,9 +278,7 @@ def draw_frame(frame: FrameData, volume: FeatureVolume, dpi: int = 100) -> Figur
         ax.set_title(f"{cam}: {100 * frame.share_all[s]:.0f}% of attention", fontsize=9)
     bars = grid[0, ncols].subgridspec(2, 1, hspace=0.5)
     fig.colorbar(anchors, cax=fig.add_subplot(bars[0])).set_label("anchor height z (m)", fontsize=8)
-    fig.colorbar(weight_colors, cax=fig.add_subplot(bars[1])).set_label(
-        f"query {frame.query}\nsample weight", fontsize=8
-    )
+    fig.colorbar(weight_colors, cax=fig.add_subplot(bars[1])).set_label("query sample weight", fontsize=8)
     split = ncols - 1  # the bar chart takes one column
     _draw_bev(fig.add_subplot(grid[1, :split]), frame, volume)
     _draw_share(fig.add_subplot(grid[1, split:ncols]), frame, cams)
@@ -297,10 +298,15 @@ def _draw_bev(ax, frame: FrameData, volume: FeatureVolume) -> None:
     lo = {k: volume.bounds[k][0] + i * cell[k] for k, i in zip(volume.plane_axes, frame.query, strict=True)}
     ax.add_patch(Rectangle((lo[view.across], lo[view.up]), cell[view.across], cell[view.up], fill=False,
                            edgecolor=QUERY_COLOR, lw=1.8, label=f"query {frame.query}"))  # fmt: skip
+    span = max(hi - lo for lo, hi in volume.bounds)
+    labelled: list[np.ndarray] = []
     for name, xyz in frame.objects.items():
-        ax.plot(xyz[view.across], xyz[view.up], marker="+", color=OBJECT_COLOR, ms=10, mew=2)
-        ax.annotate(name, (xyz[view.across], xyz[view.up]), xytext=(4, 3), textcoords="offset points",
-                    color=OBJECT_COLOR, fontsize=8, path_effects=OUTLINE)  # fmt: skip
+        xy = np.array([xyz[view.across], xyz[view.up]])
+        ax.plot(*xy, marker="+", color=OBJECT_COLOR, ms=10, mew=2)
+        if all(np.linalg.norm(xy - other) > LABEL_SPACING * span for other in labelled):  # no pile-ups
+            labelled.append(xy)
+            ax.annotate(name, xy, xytext=(4, 3), textcoords="offset points", color=OBJECT_COLOR, fontsize=8,
+                        path_effects=OUTLINE)  # fmt: skip
     if view.flip_across:
         ax.invert_xaxis()
     ax.set_xlabel(f"{AXES[view.across]} (m)" + (", left ←" if view.flip_across else ""), fontsize=9)
