@@ -42,7 +42,6 @@ import json
 import os
 import shutil
 import sys
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -175,7 +174,8 @@ def _check_camera(
     distortion_mode: str,
     problems: list[str],
 ) -> CameraReport | None:
-    """Validate one camera against its dataset feature; append problems, return the final calibration."""
+    """Validate one camera against its dataset feature: append its problems to ``problems``, or return
+    the report with the calibration to attach (rescaled, distortion handled)."""
     notes: list[str] = []
     size = dataset_image_size(key, feature)
     if tuple(calib.image_size) != size:
@@ -316,15 +316,19 @@ def plan_attachment(
 
 
 def _write_json_atomically(data: Mapping[str, Any], path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    """Write ``path`` whole or not at all: a temporary file beside it (keeping its permissions), then an
+    atomic rename over it."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
+        with open(tmp, "w", encoding="utf-8") as f:
             json.dump(data, f, indent=4, ensure_ascii=False)
             f.flush()
             os.fsync(f.fileno())
+        if path.exists():
+            shutil.copymode(path, tmp)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 

@@ -391,13 +391,14 @@ def calibrate_camera(
     key = image_key(camera)
     meta: dict = {"tool": "omnid-calibrate", "board": board.describe()}
     if intrinsics is None:
-        detections, missed = [], []
+        detections, used, missed = [], [], []
         for path in tqdm(intrinsics_images, desc=f"{camera}: finding the board", unit="image"):
             found = detect_board(_read_image(path), board)
             if found is None:
                 missed.append(path)
             else:
                 detections.append(found)
+                used.append(path)
         if missed:
             print(f"{camera}: no board found in {len(missed)} image(s): {', '.join(map(str, missed[:5]))}")
         result = calibrate_intrinsics(detections, pinhole=pinhole)
@@ -406,8 +407,9 @@ def calibrate_camera(
         worst = int(np.argmax(result.view_rms_px))
         if result.rms_px > MAX_GOOD_RMS_PX:
             print(
-                f"warning: {camera}: intrinsics reprojection RMS {result.rms_px:.2f} px is high (worst view "
-                f"{result.view_rms_px[worst]:.2f} px); check focus, motion blur and the board's flatness"
+                f"warning: {camera}: intrinsics reprojection RMS {result.rms_px:.2f} px is high (worst: "
+                f"{used[worst]}, {result.view_rms_px[worst]:.2f} px); check focus, motion blur and the "
+                f"board's flatness"
             )
     else:
         K, image_size = np.asarray(intrinsics.K), intrinsics.image_size
@@ -415,9 +417,8 @@ def calibrate_camera(
         meta["intrinsics"] = "reused"
     detection = detect_board(_read_image(extrinsics_image), board)
     if detection is None:
-        raise CalibrationError(
-            f"{extrinsics_image}: the board was not found (all inner corners must be visible)"
-        )
+        needed = "every inner corner" if board.kind == "checkerboard" else f"{MIN_CHARUCO_CORNERS}+ corners"
+        raise CalibrationError(f"{extrinsics_image}: the board was not found ({needed} must be visible)")
     if detection.image_size != tuple(image_size):
         raise CalibrationError(
             f"{extrinsics_image}: image size {detection.image_size} (h, w) differs from the intrinsics' "
@@ -425,6 +426,14 @@ def calibrate_camera(
         )
     cam_T_world, rms = estimate_cam_T_world(detection, world_T_board, K, distortion)
     meta["extrinsics_rms_px"] = rms
+    if rms > MAX_GOOD_RMS_PX:
+        print(f"warning: {camera}: extrinsics reprojection RMS {rms:.2f} px is high ({extrinsics_image})")
+    centre_world = np.linalg.inv(cam_T_world)[:3, 3]
+    if centre_world[2] < 0:
+        print(
+            f"warning: {camera}: the camera comes out {-centre_world[2]:.2f} m below the table top; check "
+            f"the board pose (the board's z axis points into the board: down for a board lying face up)"
+        )
     calibration = CameraCalibration.from_dict(
         {
             "K": K.tolist(),

@@ -186,6 +186,7 @@ def test_attach_to_uncalibrated_dataset(dataset, tmp_path):
 
     before = digests(dataset)
     original_info = (dataset / "meta" / "info.json").read_bytes()
+    original_mode = (dataset / "meta" / "info.json").stat().st_mode
     high_res = (SIZE[0] * 2, SIZE[1] * 2)
     cam_c = sim_calibration("cam_c", high_res)
     cam_c["T_world_cam"] = np.linalg.inv(np.array(cam_c.pop("T_cam_world"))).tolist()
@@ -206,6 +207,7 @@ def test_attach_to_uncalibrated_dataset(dataset, tmp_path):
     changed = {k for k in after if before.get(k) != after[k]}
     assert changed == {"meta/info.json", "meta/info.json.bak"}, "only the metadata may change"
     assert (dataset / "meta" / "info.json.bak").read_bytes() == original_info
+    assert (dataset / "meta" / "info.json").stat().st_mode == original_mode
 
     meta = LeRobotDatasetMetadata(REPO_ID, root=dataset)
     for cam in CAMS:

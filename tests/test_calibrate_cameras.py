@@ -10,6 +10,7 @@ point 1.3 px, centre 3.5 mm, rotation 0.18 deg.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import shutil
@@ -361,8 +362,9 @@ def test_bad_input_is_named(tmp_path, capsys):
     assert not (tmp_path / "r.yaml").exists()
 
 
-def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path):
-    """``--intrinsics-from`` reuses K and distortion; only the board image at the known pose is needed."""
+def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path, capsys):
+    """``--intrinsics-from`` reuses K and distortion; only the board image at the known pose is needed.
+    A board pose file with the board's z axis up (the wrong way) puts the camera under the table: warned."""
     board = CHARUCO
     images = renders(board)
     first = tmp_path / "first.yaml"
@@ -383,6 +385,16 @@ def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path):
         np.asarray(calib[key].T_cam_world), env_truth["cam_b"]["T_cam_world"]
     )
     assert position_err < POSITION_TOL_M and rotation_err < ROTATION_TOL_DEG
+    assert "below the table top" not in capsys.readouterr().out
+    wrong = world_T_board_on_table(*BOARD_ON_TABLE) @ np.diag([1.0, -1.0, -1.0, 1.0])  # z up
+    pose_file = tmp_path / "pose.json"
+    pose_file.write_text(json.dumps({"T_world_board": wrong.tolist()}))
+    args[args.index("--board-on-table") : args.index("--board-on-table") + 4] = [
+        "--board-pose",
+        str(pose_file),
+    ]
+    assert main(args) == 0
+    assert "below the table top; check the board pose" in capsys.readouterr().out
 
 
 def test_readme_walkthrough_commands_parse():
