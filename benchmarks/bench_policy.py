@@ -49,6 +49,7 @@ PROFILES = {
             "num_layers": 2,
             "backbone_layer": 3,
             "down_dims": (128, 256, 512),
+            "checkpoint_sampling": False,  # memory is no concern at this size; skip the recomputation
         },
         diffusion={"down_dims": (128, 256, 512)},
     ),
