@@ -13,18 +13,26 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from tqdm import tqdm
 
-BIN = Path(sys.executable).parent
-TRAIN_CAMERAS = ("cam_b", "cam_c", "cam_d", "cam_e")
-# The benchmark's workspace in the robot base frame (objects lie in x 0.3..0.8, y -0.3..0.35), metres.
-SIM_VOLUME_BOUNDS = "[[0.2,0.84],[-0.4,0.4],[0.0,0.32]]"
+from lerobot_omnid.commands import (
+    CHECKPOINT,
+    SIM_VOLUME_BOUNDS,
+    TRAIN_CAMERAS,
+    env_cameras,
+    eval_command,
+    is_evaluated,
+    is_trained,
+    json_list,
+    record_command,
+    recorded_episodes,
+    run_stage,
+)
+from lerobot_omnid.commands import train_command as train_command_base
 
 
 @dataclass(frozen=True)
@@ -78,36 +86,6 @@ PROFILES = {
 }
 
 
-def record_command(
-    task: str,
-    episodes: int,
-    cameras: tuple[str, ...],
-    image_size: int,
-    root: Path,
-    seed: int = 0,
-    layout: str = "id",
-) -> list[str]:
-    return [
-        str(BIN / "omnid-record"),
-        "--task",
-        task,
-        "--episodes",
-        str(episodes),
-        "--cameras",
-        ",".join(cameras),
-        "--image-size",
-        str(image_size),
-        "--layout",
-        layout,
-        "--seed",
-        str(seed),
-        "--root",
-        str(root),
-        "--repo-id",
-        f"local/{root.name}",
-    ]
-
-
 def train_command(
     dataset_root: Path,
     output_dir: Path,
@@ -118,78 +96,25 @@ def train_command(
     extra: tuple[str, ...] = (),
 ) -> list[str]:
     """`lerobot-train` of OmniD, evaluating in the env halfway and at the end of training."""
-    return [
-        str(BIN / "lerobot-train"),
-        f"--dataset.repo_id=local/{dataset_root.name}",
-        f"--dataset.root={dataset_root}",
-        "--dataset.video_backend=pyav",
+    policy_flags = [
         "--policy.type=omnid",
         f"--policy.device={device}",
         "--policy.push_to_hub=false",
-        "--policy.cameras=" + json.dumps(list(cameras)),
+        "--policy.cameras=" + json_list(cameras),
         *profile.policy_flags,
+    ]
+    env_eval = [
         "--env.type=omnid",
         f"--env.task={task}",
-        f"--env.cameras=[{','.join(cameras)}]",
+        env_cameras(cameras),
         f"--env.image_size={profile.image_size}",
         f"--env_eval_freq={max(profile.steps // 2, 1)}",
         "--eval.n_episodes=2",
         "--eval.batch_size=1",
-        f"--steps={profile.steps}",
-        f"--batch_size={profile.batch_size}",
-        f"--save_freq={profile.steps}",
-        "--num_workers=2",
-        "--log_freq=25",
-        f"--output_dir={output_dir}",
-        "--wandb.enable=false",
-        *extra,
     ]
-
-
-def eval_command(
-    checkpoint: Path,
-    output_dir: Path,
-    task: str,
-    layout: str,
-    cameras: tuple[str, ...],
-    image_size: int,
-    episodes: int,
-    device: str,
-    background: str = "id",
-    extra: tuple[str, ...] = (),
-) -> list[str]:
-    return [
-        str(BIN / "lerobot-eval"),
-        f"--policy.path={checkpoint}",
-        f"--policy.device={device}",
-        "--env.type=omnid",
-        f"--env.task={task}",
-        f"--env.layout={layout}",
-        f"--env.background={background}",
-        f"--env.cameras=[{','.join(cameras)}]",
-        f"--env.image_size={image_size}",
-        f"--eval.n_episodes={episodes}",
-        "--eval.batch_size=1",
-        f"--output_dir={output_dir}",
-        *extra,
-    ]
-
-
-def run_stage(name: str, cmd: list[str], logs: Path) -> float:
-    """Run one command, mirroring its output to the terminal and to ``logs/<name>.log``; seconds taken."""
-    logs.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    with (
-        open(logs / f"{name}.log", "w") as log,
-        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1) as proc,
-    ):
-        log.write(" ".join(cmd) + "\n")
-        for line in proc.stdout:
-            sys.stdout.write(line)
-            log.write(line)
-    if proc.returncode != 0:
-        raise SystemExit(f"stage '{name}' failed (exit code {proc.returncode}); see {logs / f'{name}.log'}")
-    return time.perf_counter() - start
+    return train_command_base(
+        dataset_root, output_dir, policy_flags, profile.steps, profile.batch_size, extra=(*env_eval, *extra)
+    )
 
 
 def success_rate(eval_dir: Path) -> tuple[float, int]:
@@ -252,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     logs = out / "logs"
     dataset = out / "data" / "select_apple_bcde"
     train_dir = out / "train"
-    checkpoint = train_dir / "checkpoints" / "last" / "pretrained_model"
+    checkpoint = train_dir / CHECKPOINT
     layouts = ("id", "position_ood")
     env_flags = (f"--env.episode_length={args.episode_length}",) if args.episode_length else ()
     commands = {
@@ -278,9 +203,9 @@ def main(argv: list[str] | None = None) -> int:
         },
     }
     done = {
-        "record": (dataset / "meta" / "info.json").is_file(),
-        "train": (checkpoint / "model.safetensors").is_file(),
-        **{f"eval_{layout}": (out / f"eval_{layout}" / "eval_info.json").is_file() for layout in layouts},
+        "record": recorded_episodes(dataset) > 0,
+        "train": is_trained(train_dir),
+        **{f"eval_{layout}": is_evaluated(out / f"eval_{layout}") for layout in layouts},
     }
     timings = {}
     stages = tqdm(commands.items(), desc="OmniD main job", unit="stage", file=sys.stdout)
