@@ -1,0 +1,414 @@
+"""What ``omnid-benchmark`` runs: its profiles, the LeRobot options of each method (every option that differs
+from the policy's default comes with its reason) and the plan of record / train / eval runs.
+
+Pure: builds command lines and paths from a profile, runs nothing. The protocol (DESIGN.md, section 4 of
+the paper): cameras B-E for training; every task's ID success; on task 0 position OOD and four background
+OODs; the task-0 model fine-tuned with camera-A episodes of task 0 and of task 1; OmniD ablations.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import gym_omnid.constants
+from gym_omnid.constants import STATE_DIM
+
+from lerobot_omnid.commands import CHECKPOINT as CHECKPOINT_SUBDIR
+from lerobot_omnid.commands import (
+    SIM_VOLUME_BOUNDS,
+    TRAIN_CAMERAS,
+    eval_command,
+    is_evaluated,
+    is_trained,
+    json_list,
+    record_command,
+    recorded_episodes,
+    train_command,
+)
+
+METHODS = ("omnid", "diffusion", "act", "vqbet")
+"""LeRobot policy types, in the order of the paper's tables."""
+LABELS = {
+    "omnid": "OmniD",
+    "diffusion": "DP",
+    "act": "ACT",
+    "vqbet": "VQ-BeT",
+    "omnid_resnet101": "OmniD ResNet-101",
+    "omnid_no_ofg": "OmniD w/o OFG",
+    "omnid_cam_a": "OmniD camera A",
+}
+TASK0, TASK1 = "select_apple", "select_chemistry_tube"  # the paper's task 0 and task 1
+BACKGROUND_OODS = ("ood1", "ood2", "ood3", "ood4")
+SETTINGS = ("id", "position_ood", *BACKGROUND_OODS)
+ABLATIONS = ("omnid_resnet101", "omnid_no_ofg", "omnid_cam_a")
+FEWSHOT = "fewshot_a"
+"""Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
+CAMERA_A = ("cam_a",)
+VQBET_CAMERA = ("cam_b",)  # LeRobot's VQ-BeT takes exactly one image
+TRAIN_SEED = 1000  # lerobot-train --seed of every run (LeRobot's default): same init RNG and batch order
+EVAL_SEED_STRIDE = 1000  # eval seed k runs env seeds k*1000 ... k*1000 + episodes - 1
+FEWSHOT_SEED = 100_000  # first env seed of the few-shot recordings (training sets start at 0)
+NOT_FINETUNABLE = {
+    "diffusion": "LeRobot's Diffusion Policy conditions its UNet on (cameras x 64 keypoint features + "
+    "state): a four-camera checkpoint has no weights for one camera's input, so it cannot be fine-tuned "
+    "on camera A alone (n/a).",
+}
+
+Flag = tuple[str, str]
+"""A command-line option and why it is set."""
+
+
+@dataclass(frozen=True)
+class BenchmarkProfile:
+    """Sizes of one benchmark run. ``tasks=None`` means every task in ``gym_omnid.constants.TASKS``."""
+
+    name: str
+    methods: tuple[str, ...]
+    tasks: tuple[str, ...] | None
+    episodes: int  # expert episodes per training set
+    fewshot_episodes: int  # camera-A episodes per few-shot set
+    image_size: int  # square images, pixels
+    steps: int  # training steps, every method and task
+    finetune_steps: int
+    batch_size: int
+    eval_episodes: int  # per setting and eval seed
+    eval_seeds: tuple[int, ...]
+    episode_length: int  # time limit of an evaluation episode, env steps (10 per second)
+    settings: tuple[str, ...]  # evaluation settings of task 0; other tasks are evaluated ID
+    fewshot: bool
+    ablations: bool
+    device: str
+    num_workers: int
+    small: bool  # CPU-sized models and a short-run optimiser schedule
+
+
+PROFILES = {
+    "mini": BenchmarkProfile(
+        name="mini",
+        methods=("omnid", "diffusion"),
+        tasks=(TASK0,),
+        episodes=50,
+        fewshot_episodes=10,
+        image_size=96,
+        steps=500,
+        finetune_steps=100,
+        batch_size=8,
+        eval_episodes=5,
+        eval_seeds=(1,),
+        episode_length=150,
+        settings=SETTINGS,
+        fewshot=False,
+        ablations=False,
+        device="cpu",
+        num_workers=2,
+        small=True,
+    ),
+    "paper": BenchmarkProfile(
+        name="paper",
+        methods=METHODS,
+        tasks=None,
+        episodes=50,
+        fewshot_episodes=10,
+        image_size=128,
+        steps=100_000,
+        finetune_steps=5000,
+        batch_size=16,
+        eval_episodes=50,
+        eval_seeds=(1, 2, 3, 4),
+        episode_length=200,
+        settings=SETTINGS,
+        fewshot=True,
+        ablations=True,
+        device="cuda",
+        num_workers=8,
+        small=False,
+    ),
+}
+
+
+def available_tasks() -> tuple[str, ...]:
+    """The benchmark's tasks, read when called: a task added to gym_omnid is picked up."""
+    return tuple(gym_omnid.constants.TASKS)
+
+
+def input_features(cameras: Sequence[str], image_size: int) -> str:
+    """``--policy.input_features`` JSON: the state and the images of ``cameras`` (the policy's inputs)."""
+    features = {"observation.state": {"type": "STATE", "shape": [STATE_DIM]}}
+    for cam in cameras:
+        features[f"observation.images.{cam}"] = {"type": "VISUAL", "shape": [3, image_size, image_size]}
+    return json.dumps(features, separators=(",", ":"))
+
+
+NO_DOWNLOAD = "offline: no pretrained torchvision weights (nothing is downloaded); all methods start from a "
+NO_DOWNLOAD += "randomly initialised ResNet, as OmniD does"
+GROUP_NORM = "GroupNorm instead of BatchNorm for a backbone trained from scratch on small batches of "
+GROUP_NORM += "correlated frames, as OmniD and the Diffusion Policy paper do"
+NO_CROP = (
+    "no crop: OmniD never crops (it would invalidate the intrinsics), so every method sees the same pixels"
+)
+
+
+def diffusion_head_flags(p: BenchmarkProfile) -> list[Flag]:
+    """Options of LeRobot's conditional UNet and its schedule, the same for OmniD and DP."""
+    if not p.small:
+        return []  # the defaults are the paper's: UNet (512,1024,2048), DDPM 100 steps, lr 1e-4, 500 warm-up
+    same = "; the same for OmniD and DP"
+    return [
+        (
+            "--policy.down_dims=[128,256,512]",
+            "a UNet with 1/16 of the default's weights, for 2 CPU cores" + same,
+        ),
+        (
+            "--policy.noise_scheduler_type=DDIM",
+            "sampling in 10 DDIM steps instead of 100 DDPM steps: 10x "
+            "cheaper evaluation, same training objective" + same,
+        ),
+        ("--policy.num_inference_steps=10", "see DDIM"),
+        ("--policy.optimizer_lr=3e-4", "short run: 3x the default learning rate" + same),
+        ("--policy.scheduler_warmup_steps=50", "short run: 50 warm-up steps instead of 500" + same),
+    ]
+
+
+def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
+    """Options of ``method`` trained from scratch on the B-E set, beyond type, device and push_to_hub."""
+    if method == "omnid":
+        shape, maps = ("[16,20,8]", "6x6") if p.small else ("[32,40,16]", "8x8")
+        flags = [
+            ("--policy.cameras=" + json_list(TRAIN_CAMERAS), "cameras B-E, the protocol's training views"),
+            (
+                f"--policy.volume_bounds={SIM_VOLUME_BOUNDS}",
+                "the benchmark's workspace (objects lie in x "
+                "0.3-0.8 m, y -0.3-0.35 m) instead of the paper robot's",
+            ),
+            (
+                f"--policy.volume_shape={shape}",
+                "4 cm cells, CPU size"
+                if p.small
+                else "2 cm cells over the benchmark's smaller workspace (paper: 64x16x64 over its own)",
+            ),
+            ("--policy.backbone_layer=3", f"stride-16 features ({maps} maps at {p.image_size} px)"),
+        ]
+        if p.small:
+            flags += [
+                ("--policy.d_model=64", "CPU size: OFG width 64 (paper 128)"),
+                ("--policy.num_layers=2", "CPU size: 2 OFG layers (paper 6)"),
+            ]
+        return flags + diffusion_head_flags(p)
+    if method == "diffusion":
+        return [
+            ("--policy.pretrained_backbone_weights=null", NO_DOWNLOAD),
+            ("--policy.use_group_norm=true", GROUP_NORM),
+            ("--policy.crop_shape=null", NO_CROP),
+            (
+                "--policy.use_separate_rgb_encoder_per_camera=false",
+                "one ResNet-18 shared by the cameras, as in "
+                "OmniD (one per camera: 4x the backbone weights and compute)",
+            ),
+            (
+                "--policy.horizon=16",
+                "OmniD's (the paper's) action timing: 2 observations, 16 predicted "
+                "actions, 8 executed (LeRobot's DP default: 64 predicted, 32 executed)",
+            ),
+            ("--policy.n_action_steps=8", "see horizon"),
+            ("--policy.drop_n_last_frames=7", "horizon - n_action_steps - n_obs_steps + 1, as OmniD"),
+            *diffusion_head_flags(p),
+        ]
+    if method == "act":
+        return [
+            ("--policy.pretrained_backbone_weights=null", NO_DOWNLOAD),
+            (
+                "--policy.chunk_size=16",
+                "the same 16 predicted actions as OmniD/DP (default 100: 10 s at "
+                "10 Hz, longer than an expert episode)",
+            ),
+            ("--policy.n_action_steps=8", "8 actions executed per prediction, as OmniD/DP"),
+        ]
+    if method == "vqbet":
+        flags = [
+            ("--policy.pretrained_backbone_weights=null", NO_DOWNLOAD),
+            ("--policy.use_group_norm=true", GROUP_NORM),
+            ("--policy.crop_shape=null", NO_CROP + " (VQ-BeT's default: random 84x84 crops)"),
+            (
+                "--policy.input_features=" + input_features(VQBET_CAMERA, p.image_size),
+                "LeRobot's VQ-BeT takes exactly one image: camera B (the front view) of the four",
+            ),
+            ("--policy.n_obs_steps=2", "2 observations, as OmniD/DP (default 5)"),
+            ("--policy.action_chunk_size=8", "8 actions executed per prediction, as OmniD/DP (default 5)"),
+            (
+                f"--policy.n_vqvae_training_steps={max(p.steps // 5, 1)}",
+                "the action tokeniser (VQ-VAE) "
+                "trains in the first 20% of the steps, the GPT after it (default 20000 = 20% of 100k)",
+            ),
+        ]
+        if p.small:
+            flags.append(("--policy.scheduler_warmup_steps=50", "short run: 50 warm-up steps, as OmniD/DP"))
+        return flags
+    raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
+
+
+def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
+    """Options that turn a B-E checkpoint (given with ``--policy.path``) into a camera-A policy."""
+    if method == "omnid":
+        return [
+            (
+                "--policy.cameras=" + json_list(CAMERA_A),
+                "camera A only; its calibration comes from "
+                "the dataset, every weight from the checkpoint (the OFG has no per-camera weights)",
+            )
+        ]
+    if method in ("act", "vqbet"):
+        flags = [
+            (
+                "--policy.input_features=" + input_features(CAMERA_A, p.image_size),
+                "camera A replaces the training camera(s); the weights do not depend on which camera",
+            )
+        ]
+        if method == "vqbet":
+            flags.append(
+                (
+                    "--policy.n_vqvae_training_steps=0",
+                    "the checkpoint's action tokeniser is kept; the GPT gets the usual warm-up and schedule",
+                )
+            )
+        return flags
+    raise ValueError(f"method {method!r}: {NOT_FINETUNABLE.get(method, 'cannot be fine-tuned')}")
+
+
+def ablation_flags(name: str, p: BenchmarkProfile) -> list[Flag]:
+    base = method_flags("omnid", p)
+    if name == "omnid_resnet101":
+        return [*base, ("--policy.vision_backbone=resnet101", "ablation: deeper backbone")]
+    if name == "omnid_no_ofg":
+        return [*base, ("--policy.use_ofg=false", "ablation: per-camera keypoint features, no OFG")]
+    if name == "omnid_cam_a":
+        return [(f, r) for f, r in base if not f.startswith("--policy.cameras=")] + [
+            ("--policy.cameras=" + json_list(CAMERA_A), "ablation: one view, camera A (its own 50 episodes)")
+        ]
+    raise ValueError(f"ablation: expected one of {list(ABLATIONS)}, got {name!r}")
+
+
+def setting_env(setting: str) -> tuple[str, str]:
+    """(layout, background) of an evaluation setting."""
+    if setting in ("id", FEWSHOT):
+        return "id", "id"
+    if setting == "position_ood":
+        return "position_ood", "id"
+    if setting in BACKGROUND_OODS:
+        return "id", setting
+    raise ValueError(
+        f"setting: expected id, {FEWSHOT}, position_ood or one of {list(BACKGROUND_OODS)}, got {setting!r}"
+    )
+
+
+@dataclass(frozen=True)
+class Run:
+    """One command of the plan. ``name`` is unique (and names the log); ``needs`` lists runs whose output
+    this one reads; an eval run carries ``result`` = (model, task, setting) and its eval ``seed``."""
+
+    name: str
+    kind: str  # "record" | "train" | "eval"
+    cmd: tuple[str, ...]
+    output: Path
+    needs: tuple[str, ...] = ()
+    episodes: int = 0
+    result: tuple[str, str, str] | None = None
+    seed: int | None = None
+
+
+def is_done(run: Run) -> bool:
+    """Whether ``run``'s output is complete (then it is not run again)."""
+    if run.kind == "record":
+        return recorded_episodes(run.output) >= run.episodes
+    if run.kind == "train":
+        return is_trained(run.output)
+    return is_evaluated(run.output)
+
+
+def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run]:
+    """Every run of the benchmark. Each model's evaluations follow its training, so results come early."""
+    runs: list[Run] = []
+
+    def record(name: str, task: str, cameras: Sequence[str], episodes: int, seed: int) -> None:
+        root = out / "data" / name
+        cmd = record_command(task, episodes, cameras, p.image_size, root, seed=seed)
+        runs.append(Run(f"record/{name}", "record", tuple(cmd), root, episodes=episodes))
+
+    def train(
+        folder: str, model: str, task: str, dataset: str, flags: list[str], steps: int, needs=()
+    ) -> Run:
+        output = out / folder / model / task
+        root = out / "data" / dataset
+        cmd = train_command(root, output, flags, steps, p.batch_size, p.num_workers, seed=TRAIN_SEED)
+        run = Run(f"{folder}/{model}/{task}", "train", tuple(cmd), output, (f"record/{dataset}", *needs))
+        runs.append(run)
+        return run
+
+    def evaluate(
+        trained: Run, model: str, task: str, settings: Sequence[str], cameras: Sequence[str]
+    ) -> None:
+        for setting in settings:
+            layout, background = setting_env(setting)
+            for k in p.eval_seeds:
+                output = out / "eval" / model / task / setting / f"seed{k}"
+                cmd = eval_command(
+                    trained.output / CHECKPOINT_SUBDIR,
+                    output,
+                    task,
+                    layout,
+                    cameras,
+                    p.image_size,
+                    p.eval_episodes,
+                    p.device,
+                    background,
+                    seed=k * EVAL_SEED_STRIDE,
+                    extra=(f"--env.episode_length={p.episode_length}",),
+                )
+                name = f"eval/{model}/{task}/{setting}/seed{k}"
+                runs.append(
+                    Run(name, "eval", tuple(cmd), output, (trained.name,), 0, (model, task, setting), k)
+                )
+
+    def common(method: str) -> list[str]:
+        return [f"--policy.type={method}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
+
+    for task in tasks:
+        record(f"{task}_bcde", task, TRAIN_CAMERAS, p.episodes, seed=0)
+    if p.ablations and TASK0 in tasks:
+        record(f"{TASK0}_a", TASK0, CAMERA_A, p.episodes, seed=0)  # the B-E set's episodes, seen by A
+    fewshot_tasks = (TASK0, TASK1) if p.fewshot and TASK0 in tasks else ()
+    for task in fewshot_tasks:
+        record(f"{task}_a_fewshot", task, CAMERA_A, p.fewshot_episodes, seed=FEWSHOT_SEED)
+
+    for task in tasks:
+        for method in p.methods:
+            flags = [f for f, _ in method_flags(method, p)]
+            trained = train("train", method, task, f"{task}_bcde", [*common(method), *flags], p.steps)
+            cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
+            evaluate(trained, method, task, p.settings if task == TASK0 else ("id",), cameras)
+    if p.ablations and TASK0 in tasks:
+        for name in ABLATIONS:
+            flags = [f for f, _ in ablation_flags(name, p)]
+            dataset = f"{TASK0}_a" if name == "omnid_cam_a" else f"{TASK0}_bcde"
+            trained = train("train", name, TASK0, dataset, [*common("omnid"), *flags], p.steps)
+            evaluate(trained, name, TASK0, ("id",), CAMERA_A if name == "omnid_cam_a" else TRAIN_CAMERAS)
+    for method in p.methods:
+        if method in NOT_FINETUNABLE:
+            continue
+        base = out / "train" / method / TASK0 / CHECKPOINT_SUBDIR
+        for task in fewshot_tasks:
+            flags = [f"--policy.path={base}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
+            flags += [f for f, _ in finetune_flags(method, p)]
+            trained = train(
+                "finetune",
+                method,
+                task,
+                f"{task}_a_fewshot",
+                flags,
+                p.finetune_steps,
+                needs=(f"train/{method}/{TASK0}",),
+            )
+            evaluate(trained, method, task, (FEWSHOT,), CAMERA_A)
+    return runs

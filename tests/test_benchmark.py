@@ -1,0 +1,379 @@
+"""omnid-benchmark: the plan per profile (flags, same data/steps/seeds across methods, new tasks), the
+options parsed by LeRobot's own config classes, resumability, the report and chart, argument errors; one
+slow end-to-end run of the real tools at tiny sizes."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import draccus
+import gym_omnid.constants
+import pytest
+
+import lerobot_omnid.benchmark as bench
+from lerobot_omnid.benchmark_plan import (
+    PROFILES,
+    SETTINGS,
+    TASK0,
+    TASK1,
+    available_tasks,
+    build_plan,
+    is_done,
+)
+from lerobot_omnid.benchmark_report import (
+    EvalEntry,
+    ablation_table,
+    bar_chart,
+    collect,
+    generalisation_table,
+    id_table,
+    raw_table,
+)
+
+LABELS = bench.LABELS
+
+
+def flag(cmd, name: str) -> str | None:
+    """Value of ``--name=value`` in a command (None if absent)."""
+    values = [a.split("=", 1)[1] for a in cmd if a.startswith(f"--{name}=")]
+    assert len(values) <= 1, (name, values)
+    return values[0] if values else None
+
+
+def by_name(runs):
+    return {r.name: r for r in runs}
+
+
+def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
+    runs = build_plan(PROFILES["mini"], tmp_path, (TASK0,))
+    assert [r.kind for r in runs].count("record") == 1
+    trains = [r for r in runs if r.kind == "train"]
+    evals = [r for r in runs if r.kind == "eval"]
+    assert [r.name for r in trains] == ["train/omnid/select_apple", "train/diffusion/select_apple"]
+    assert {r.result for r in evals} == {(m, TASK0, s) for m in ("omnid", "diffusion") for s in SETTINGS}
+    for option in ("dataset.root", "steps", "batch_size", "seed", "save_freq", "num_workers"):
+        assert len({flag(r.cmd, option) for r in trains}) == 1, option
+    assert flag(trains[0].cmd, "dataset.root") == str(tmp_path / "data" / "select_apple_bcde")
+    assert all(flag(r.cmd, "env.type") is None for r in trains)  # no in-training env evaluation
+    for option in ("seed", "eval.n_episodes", "env.episode_length", "env.image_size", "env.cameras"):
+        assert len({flag(r.cmd, option) for r in evals}) == 1, option
+    assert flag(evals[0].cmd, "env.cameras") == "[cam_b,cam_c,cam_d,cam_e]"
+    settings = {(flag(r.cmd, "env.layout"), flag(r.cmd, "env.background")) for r in evals}
+    assert settings == {("id", "id"), ("position_ood", "id")} | {("id", f"ood{i}") for i in range(1, 5)}
+    dp = by_name(runs)["train/diffusion/select_apple"].cmd
+    for expected in (
+        "--policy.pretrained_backbone_weights=null",
+        "--policy.crop_shape=null",
+        "--policy.use_separate_rgb_encoder_per_camera=false",
+        "--policy.horizon=16",
+        "--policy.n_action_steps=8",
+        "--policy.use_group_norm=true",
+    ):
+        assert expected in dp
+    omnid = by_name(runs)["train/omnid/select_apple"].cmd
+    head = (
+        "down_dims",
+        "noise_scheduler_type",
+        "num_inference_steps",
+        "optimizer_lr",
+        "scheduler_warmup_steps",
+    )
+    assert {flag(omnid, f"policy.{h}") for h in head} == {flag(dp, f"policy.{h}") for h in head}
+    for r in evals:  # each eval reads the checkpoint of its own training run
+        assert flag(r.cmd, "policy.path").startswith(str(tmp_path / "train" / r.result[0]))
+
+
+def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
+    p = PROFILES["paper"]
+    runs = by_name(build_plan(p, tmp_path, available_tasks()))
+    for task in available_tasks():
+        for m in ("omnid", "diffusion", "act", "vqbet"):
+            assert flag(runs[f"train/{m}/{task}"].cmd, "steps") == "100000"
+            assert [flag(runs[f"eval/{m}/{task}/id/seed{k}"].cmd, "seed") for k in (1, 2, 3, 4)] == [
+                "1000",
+                "2000",
+                "3000",
+                "4000",
+            ]
+    assert flag(runs["eval/act/select_apple/ood3/seed2"].cmd, "eval.n_episodes") == "50"
+    assert "eval/act/select_chemistry_tube/ood3/seed2" not in runs  # OOD settings: task 0 only
+    vqbet = runs["train/vqbet/select_apple"].cmd
+    assert json.loads(flag(vqbet, "policy.input_features")) == {
+        "observation.state": {"type": "STATE", "shape": [16]},
+        "observation.images.cam_b": {"type": "VISUAL", "shape": [3, 128, 128]},
+    }
+    assert flag(vqbet, "policy.n_vqvae_training_steps") == "20000"
+    assert flag(runs["eval/vqbet/select_apple/id/seed1"].cmd, "env.cameras") == "[cam_b]"
+    assert flag(runs["train/act/select_apple"].cmd, "policy.chunk_size") == "16"
+    # Few-shot: the task-0 checkpoint, fine-tuned on camera-A sets of task 0 and task 1; DP cannot be.
+    for m in ("omnid", "act", "vqbet"):
+        for task in (TASK0, TASK1):
+            run = runs[f"finetune/{m}/{task}"]
+            assert flag(run.cmd, "policy.path") == str(
+                tmp_path / "train" / m / TASK0 / "checkpoints" / "last" / "pretrained_model"
+            )
+            assert f"train/{m}/{TASK0}" in run.needs
+            assert flag(run.cmd, "dataset.root") == str(tmp_path / "data" / f"{task}_a_fewshot")
+            assert flag(run.cmd, "steps") == "5000" and flag(run.cmd, "policy.type") is None
+            assert flag(runs[f"eval/{m}/{task}/fewshot_a/seed1"].cmd, "env.cameras") == "[cam_a]"
+    assert flag(runs["finetune/omnid/select_apple"].cmd, "policy.cameras") == '["cam_a"]'
+    assert "cam_a" in flag(runs["finetune/act/select_chemistry_tube"].cmd, "policy.input_features")
+    assert not any(name.startswith("finetune/diffusion") for name in runs)
+    assert flag(runs["record/select_apple_a_fewshot"].cmd, "seed") is None  # omnid-record: "--seed N"
+    record = runs["record/select_chemistry_tube_a_fewshot"].cmd
+    assert record[record.index("--seed") + 1] == "100000" and record[record.index("--episodes") + 1] == "10"
+    # Ablations on task 0.
+    assert flag(runs["train/omnid_resnet101/select_apple"].cmd, "policy.vision_backbone") == "resnet101"
+    assert flag(runs["train/omnid_no_ofg/select_apple"].cmd, "policy.use_ofg") == "false"
+    cam_a = runs["train/omnid_cam_a/select_apple"].cmd
+    assert flag(cam_a, "policy.cameras") == '["cam_a"]'
+    assert flag(cam_a, "dataset.root") == str(tmp_path / "data" / "select_apple_a")
+    assert flag(runs["eval/omnid_cam_a/select_apple/id/seed4"].cmd, "env.cameras") == "[cam_a]"
+
+
+def test_new_tasks_are_picked_up(monkeypatch, tmp_path):
+    monkeypatch.setattr(gym_omnid.constants, "TASKS", (*gym_omnid.constants.TASKS, "get_coffee"))
+    assert available_tasks()[-1] == "get_coffee"
+    runs = by_name(build_plan(PROFILES["paper"], tmp_path, available_tasks()))
+    assert "record/get_coffee_bcde" in runs
+    assert {f"train/{m}/get_coffee" for m in ("omnid", "diffusion", "act", "vqbet")} <= set(runs)
+    assert [n for n in runs if n.startswith("eval/omnid/get_coffee/")] == [
+        f"eval/omnid/get_coffee/id/seed{k}" for k in (1, 2, 3, 4)
+    ]
+
+
+@pytest.mark.parametrize("profile", ["mini", "paper"])
+def test_lerobot_parses_every_training_command(profile, tmp_path):
+    """Each from-scratch training command is a valid `lerobot-train` configuration (option names, values
+    and the policy configs' own checks)."""
+    import lerobot.policies  # noqa: F401  (registers the stock policy configs)
+    from lerobot.configs.train import TrainPipelineConfig
+
+    p = dataclasses.replace(PROFILES[profile], methods=("omnid", "diffusion", "act", "vqbet"))
+    for run in build_plan(p, tmp_path, (TASK0,)):
+        if run.kind == "train" and flag(run.cmd, "policy.type"):
+            cfg = draccus.parse(TrainPipelineConfig, args=list(run.cmd[1:]))
+            assert cfg.policy.type == flag(run.cmd, "policy.type"), run.name
+            assert cfg.steps == p.steps and cfg.seed == bench.TRAIN_SEED
+
+
+def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...] = ()):
+    """A stand-in for run_logged: writes what each real tool would leave behind."""
+
+    def run(cmd, log_path, on_line=None):
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+        log_path.write_text(" ".join(cmd))
+        tool = Path(cmd[0]).name
+        calls.append(tool)
+        if tool in fail:
+            return 1
+        if tool == "omnid-record":
+            root = Path(cmd[cmd.index("--root") + 1])
+            (root / "meta").mkdir(parents=True)
+            (root / "meta" / "info.json").write_text(
+                json.dumps({"total_episodes": int(cmd[cmd.index("--episodes") + 1])})
+            )
+        elif tool == "lerobot-train":
+            ckpt = Path(flag(cmd, "output_dir")) / "checkpoints" / "last" / "pretrained_model"
+            ckpt.mkdir(parents=True)
+            (ckpt / "model.safetensors").write_bytes(b"")
+        else:
+            out = Path(flag(cmd, "output_dir"))
+            out.mkdir(parents=True, exist_ok=True)
+            rate = rates.get(
+                out.relative_to(out.parents[3]).parts[0], 0.0
+            )  # .../eval/<model>/<task>/<setting>/seed<k>
+            n = int(flag(cmd, "eval.n_episodes"))
+            (out / "eval_info.json").write_text(
+                json.dumps({"overall": {"pc_success": rate, "n_episodes": n}})
+            )
+        return 0
+
+    return run
+
+
+def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
+    calls: list[str] = []
+    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    out = tmp_path / "bench"
+    assert bench.main(["--out", str(out)]) == 0
+    assert calls.count("omnid-record") == 1 and calls.count("lerobot-train") == 2
+    assert calls.count("lerobot-eval") == 12
+    report = (out / "report.md").read_text()
+    assert "| OmniD | **60.0** | 60.0 |" in report  # ID table: best per task in bold, then the average
+    assert "| DP | 20.0 | 20.0 | 20/20/20/20 | — | — |" in report
+    assert "--policy.use_separate_rgb_encoder_per_camera=false" in report  # the options and their reasons
+    assert (out / "benchmark.png").stat().st_size > 0
+    cells = json.loads((out / "results.json").read_text())["cells"]
+    assert len(cells) == 12 and all(Path(c["eval_info"][0]).is_file() for c in cells)
+    assert "15 runs: 15 ran" in capsys.readouterr().out
+
+    # Resume: nothing finished is redone; an eval whose result is gone, an incomplete training run (its folder
+    # without a checkpoint) and a dataset with too few episodes are.
+    (out / "eval" / "diffusion" / TASK0 / "ood2" / "seed1" / "eval_info.json").unlink()
+    calls.clear()
+    assert bench.main(["--out", str(out)]) == 0
+    assert calls == ["lerobot-eval"]
+    info = out / "data" / "select_apple_bcde" / "meta" / "info.json"
+    info.write_text(json.dumps({"total_episodes": 3}))
+    (
+        out
+        / "train"
+        / "diffusion"
+        / TASK0
+        / "checkpoints"
+        / "last"
+        / "pretrained_model"
+        / "model.safetensors"
+    ).unlink()
+    calls.clear()
+    assert bench.main(["--out", str(out)]) == 0
+    assert calls == ["omnid-record", "lerobot-train"]  # evals of DP are reused: their files exist
+    assert "removing the incomplete" in capsys.readouterr().out
+
+
+def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
+    calls: list[str] = []
+    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {}, fail=("lerobot-train",)))
+    assert bench.main(["--out", str(tmp_path), "--settings", "id,ood1"]) == 1
+    assert calls == ["omnid-record", "lerobot-train", "lerobot-train"]
+    out = capsys.readouterr().out
+    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 4 blocked" in out
+    assert (tmp_path / "report.md").is_file()
+
+
+def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
+    assert bench.main(["--profile", "paper", "--dry-run", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("lerobot-train ") == 17 and "n/a" in out and "Plan: " in out
+    assert not any(tmp_path.iterdir())
+
+
+def _write_eval(path: Path, rate: float, n: int) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"overall": {"pc_success": rate, "n_episodes": n}, "per_task": []}))
+    return path
+
+
+def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
+    entries = [
+        EvalEntry(("omnid", TASK0, "id"), 1, _write_eval(tmp_path / "a.json", 40.0, 5)),
+        EvalEntry(("omnid", TASK0, "id"), 2, _write_eval(tmp_path / "b.json", 60.0, 5)),
+        EvalEntry(("omnid", TASK1, "id"), 1, _write_eval(tmp_path / "c.json", 100.0, 10)),
+        EvalEntry(("diffusion", TASK0, "id"), 1, _write_eval(tmp_path / "d.json", 80.0, 10)),
+        EvalEntry(("diffusion", TASK1, "id"), 1, tmp_path / "missing.json"),
+        *(
+            EvalEntry(("omnid", TASK0, f"ood{i}"), 1, _write_eval(tmp_path / f"o{i}.json", 10.0 * i, 10))
+            for i in (1, 2, 4)
+        ),
+        EvalEntry(("omnid", TASK1, "fewshot_a"), 1, _write_eval(tmp_path / "f.json", 30.0, 10)),
+        EvalEntry(("omnid_no_ofg", TASK0, "id"), 1, _write_eval(tmp_path / "n.json", 20.0, 10)),
+    ]
+    results = collect(entries)
+    assert results[("omnid", TASK0, "id")].episodes == 10 and results[("omnid", TASK0, "id")].rate == 50.0
+    table = id_table(results, ("omnid", "diffusion"), (TASK0, TASK1), LABELS)
+    assert table[0] == "| Method | Select Apple | Select Chemistry Tube | Average |"
+    assert table[2] == "| OmniD | 50.0 | 100.0 | 75.0 |"  # a lone value is not bold
+    assert table[3] == "| DP | **80.0** | — | 80.0* |"  # average over the evaluated tasks only
+    n_a = {("diffusion", TASK0, "fewshot_a"), ("diffusion", TASK1, "fewshot_a")}
+    table = generalisation_table(
+        results, ("omnid", "diffusion"), TASK0, TASK1, ("ood1", "ood2", "ood3", "ood4"), n_a, LABELS
+    )
+    assert table[0].startswith("| Method | Task 0 ID | Position OOD | Background OOD (ood1/ood2/ood3/ood4) |")
+    assert table[2] == "| OmniD | 50.0 | — | 10/20/—/40 | — | 30.0 |"
+    assert table[3] == "| DP | **80.0** | — | —/—/—/— | n/a | n/a |"
+    table = ablation_table(results, TASK0)
+    assert table[0] == "|  | ResNet-101 | w/o OFG | Camera A | Base model |"
+    assert table[2] == "| ResNet-18 |  | ✓ | ✓ | ✓ |" and table[4] == "| OFG module | ✓ |  | ✓ | ✓ |"
+    assert table[-1] == "| **Success rate (%)** | — | 20.0 | — | 50.0 |"
+    raw = raw_table(entries, LABELS)
+    assert "| DP | select_chemistry_tube | id | 1 |  | — | not run yet |" in raw
+    assert f"`{tmp_path / 'b.json'}`" in "\n".join(raw)
+    png = bar_chart(
+        results,
+        ("omnid", "diffusion"),
+        (TASK0, TASK1),
+        TASK0,
+        TASK1,
+        ("ood1", "ood2", "ood3", "ood4"),
+        LABELS,
+        tmp_path / "chart" / "b.png",
+    )
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--methods", "omnid,pi0"], ["--methods", "pi0", "vqbet"]),
+        (["--tasks", "make_tea"], ["--tasks", "make_tea", "select_apple"]),
+        (["--settings", "id,ood9"], ["--settings", "ood9", "position_ood"]),
+        (["--steps", "0"], ["--steps", ">= 1", "0"]),
+        (["--num-workers", "-1"], ["--num-workers", ">= 0", "-1"]),
+        (["--eval-seeds", "0,1"], ["--eval-seeds", "positive", "[0, 1]"]),
+        (["--eval-seeds", "1,x"], ["--eval-seeds", "1,x"]),
+        (["--profile", "huge"], ["--profile", "huge", "mini"]),
+        (["--dry-run", "--report-only"], ["--dry-run", "--report-only"]),
+    ],
+)
+def test_bad_arguments_are_named(argv, expected, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main([*argv, "--out", str(tmp_path / "b")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    for text in expected:
+        assert text in err
+    assert not (tmp_path / "b").exists()
+
+
+def test_resumability_checks(tmp_path):
+    runs = build_plan(PROFILES["mini"], tmp_path, (TASK0,))
+    record, train, first_eval = runs[0], runs[1], runs[2]
+    assert not any(is_done(r) for r in runs)
+    _write_eval(first_eval.output / "eval_info.json", 0.0, 5)
+    (train.output / "checkpoints" / "last" / "pretrained_model").mkdir(parents=True)
+    assert is_done(first_eval) and not is_done(train)  # a checkpoint folder without weights is unfinished
+    (train.output / "checkpoints" / "last" / "pretrained_model" / "model.safetensors").write_bytes(b"")
+    (record.output / "meta").mkdir(parents=True)
+    (record.output / "meta" / "info.json").write_text(json.dumps({"total_episodes": 49}))
+    assert is_done(train) and not is_done(record)
+
+
+@pytest.mark.slow
+def test_real_tools_end_to_end_tiny(tmp_path):
+    """The real omnid-record, lerobot-train (OmniD and stock DP) and lerobot-eval at the smallest sizes."""
+    out = tmp_path / "bench"
+    argv = [
+        str(Path(sys.executable).parent / "omnid-benchmark"),
+        "--out",
+        str(out),
+        "--settings",
+        "id",
+        "--episodes",
+        "1",
+        "--steps",
+        "2",
+        "--batch-size",
+        "2",
+        "--image-size",
+        "64",
+        "--num-workers",
+        "0",
+        "--eval-episodes",
+        "1",
+        "--episode-length",
+        "10",
+    ]
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=900, env=env)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    cells = {(c["model"], c["setting"]): c for c in json.loads((out / "results.json").read_text())["cells"]}
+    assert set(cells) == {("omnid", "id"), ("diffusion", "id")}
+    assert all(c["episodes"] == 1 for c in cells.values())
+    assert "| Method | Select Apple | Average |" in (out / "report.md").read_text()
