@@ -262,3 +262,27 @@ def test_bad_calibration_file_names_file_and_camera(tmp_path):
     path.write_text(json.dumps({"cam_a": bad}))
     with pytest.raises(CalibrationError, match=r"rig\.json: cam_a\.K: expected a 3x3"):
         tiny_config(calibration_path=str(path))
+
+
+def test_backbone_loads_a_local_weights_file(tmp_path):
+    import torchvision
+
+    reference = torchvision.models.resnet18(weights=None)
+    path = tmp_path / "resnet18.pt"
+    torch.save(reference.state_dict(), path)
+    policy = OmniDPolicy(tiny_config(pretrained_backbone_weights=str(path), use_group_norm=False))
+    assert torch.equal(policy.model.backbone.stem[0].weight, reference.conv1.weight)
+    assert torch.equal(policy.model.backbone.stages[2][0].conv1.weight, reference.layer3[0].conv1.weight)
+    with pytest.raises(ValueError, match="`use_group_norm=True` cannot load"):
+        OmniDPolicy(tiny_config(pretrained_backbone_weights=str(path)))
+    with pytest.raises(FileNotFoundError, match="`pretrained_backbone_weights`: no file"):
+        OmniDPolicy(
+            tiny_config(pretrained_backbone_weights=str(tmp_path / "missing.pt"), use_group_norm=False)
+        )
+
+
+def test_resnet101_backbone_for_the_ablation():
+    policy = OmniDPolicy(tiny_config(vision_backbone="resnet101"))
+    assert policy.model.backbone.out_channels == 1024  # layer3 of a Bottleneck ResNet
+    loss, _ = policy.forward(random_batch(policy.config, batch_size=1))
+    assert torch.isfinite(loss)
