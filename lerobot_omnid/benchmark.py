@@ -233,8 +233,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--settings", type=_csv(str, SETTINGS), help=f"task-0 settings, of {','.join(SETTINGS)}"
     )
     parser.add_argument("--eval-seeds", type=_csv(int, None), help="comma-separated eval seeds, e.g. 1,2,3,4")
-    for option in OVERRIDES:
-        parser.add_argument(f"--{option.replace('_', '-')}", type=int, help="override the profile's value")
+    for option, (name, _) in OVERRIDES.items():
+        values = ", ".join(f"{k} {getattr(v, name)}" for k, v in PROFILES.items())
+        parser.add_argument(
+            f"--{option.replace('_', '-')}", type=int, help=f"override the profile's ({values})"
+        )
     parser.add_argument(
         "--dry-run", action="store_true", help="print the plan and every command, run nothing"
     )
@@ -270,15 +273,19 @@ def main(argv: list[str] | None = None) -> int:
     out = (args.out or Path(f"outputs/benchmark_{p.name}")).resolve()
     runs = build_plan(p, out, tasks)
     print("\n".join(settings_markdown(p, tasks)))
-    kinds = {k: sum(r.kind == k for r in runs) for k in ("record", "train", "eval")}
+    kinds = {k: sum(r.kind == k for r in runs) for k in ("record", "prepare", "train", "eval")}
+    per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
     todo = sum(not is_done(r) for r in runs)
-    print(
-        f"\nPlan: {len(runs)} runs ({', '.join(f'{n} {k}' for k, n in kinds.items())}), {todo} to run; {out}"
-    )
+    print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run; {out}")
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return 0
-    status, seconds = ({}, {}) if args.report_only else execute(runs, out, args.verbose)
+    try:
+        status, seconds = ({}, {}) if args.report_only else execute(runs, out, args.verbose)
+    except KeyboardInterrupt:
+        write_outputs(p, tasks, runs, out)
+        print(f"\nInterrupted: finished runs are kept, the one in progress is redone next time; {out}")
+        return 130
     summary = write_outputs(p, tasks, runs, out)
     counts = {s: list(status.values()).count(s) for s in ("reused", "ran", "failed", "blocked")}
     print(f"\n{len(runs)} runs: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran"))

@@ -9,6 +9,7 @@ OODs; the task-0 model fine-tuned with camera-A episodes of task 0 and of task 1
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,48 +86,22 @@ class BenchmarkProfile:
     small: bool  # CPU-sized models and a short-run optimiser schedule
 
 
+# fmt: off
 PROFILES = {
     "mini": BenchmarkProfile(
-        name="mini",
-        methods=("omnid", "diffusion"),
-        tasks=(TASK0,),
-        episodes=50,
-        fewshot_episodes=10,
-        image_size=96,
-        steps=500,
-        finetune_steps=100,
-        batch_size=8,
-        eval_episodes=5,
-        eval_seeds=(1,),
-        episode_length=150,
-        settings=SETTINGS,
-        fewshot=False,
-        ablations=False,
-        device="cpu",
-        num_workers=2,
+        name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
+        image_size=96, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, eval_seeds=(1,),
+        episode_length=200, settings=SETTINGS, fewshot=False, ablations=False, device="cpu", num_workers=2,
         small=True,
     ),
     "paper": BenchmarkProfile(
-        name="paper",
-        methods=METHODS,
-        tasks=None,
-        episodes=50,
-        fewshot_episodes=10,
-        image_size=128,
-        steps=100_000,
-        finetune_steps=5000,
-        batch_size=16,
-        eval_episodes=50,
-        eval_seeds=(1, 2, 3, 4),
-        episode_length=200,
-        settings=SETTINGS,
-        fewshot=True,
-        ablations=True,
-        device="cuda",
-        num_workers=8,
+        name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
+        steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, eval_seeds=(1, 2, 3, 4),
+        episode_length=200, settings=SETTINGS, fewshot=True, ablations=True, device="cuda", num_workers=8,
         small=False,
     ),
 }
+# fmt: on
 
 
 def available_tasks() -> tuple[str, ...]:
@@ -252,27 +227,18 @@ def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
 def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
     """Options that turn a B-E checkpoint (given with ``--policy.path``) into a camera-A policy."""
     if method == "omnid":
-        return [
-            (
-                "--policy.cameras=" + json_list(CAMERA_A),
-                "camera A only; its calibration comes from "
-                "the dataset, every weight from the checkpoint (the OFG has no per-camera weights)",
-            )
-        ]
+        why = "camera A only: its calibration comes from the dataset, every weight from the checkpoint"
+        return [("--policy.cameras=" + json_list(CAMERA_A), why)]
     if method in ("act", "vqbet"):
-        flags = [
-            (
-                "--policy.input_features=" + input_features(CAMERA_A, p.image_size),
-                "camera A replaces the training camera(s); the weights do not depend on which camera",
-            )
-        ]
+        why = (
+            "a copy of the task-0 checkpoint whose image input is camera A instead of the training "
+            "camera(s) (lerobot_omnid.checkpoint_cameras: a --policy.input_features override is merged "
+            "with the checkpoint's, it cannot drop them); the weights do not depend on the camera"
+        )
+        flags = [("--policy.path=<copy with camera A>", why)]
         if method == "vqbet":
-            flags.append(
-                (
-                    "--policy.n_vqvae_training_steps=0",
-                    "the checkpoint's action tokeniser is kept; the GPT gets the usual warm-up and schedule",
-                )
-            )
+            why = "the checkpoint's action tokeniser is kept; the GPT gets the usual warm-up and schedule"
+            flags.append(("--policy.n_vqvae_training_steps=0", why))
         return flags
     raise ValueError(f"method {method!r}: {NOT_FINETUNABLE.get(method, 'cannot be fine-tuned')}")
 
@@ -285,7 +251,10 @@ def ablation_flags(name: str, p: BenchmarkProfile) -> list[Flag]:
         return [*base, ("--policy.use_ofg=false", "ablation: per-camera keypoint features, no OFG")]
     if name == "omnid_cam_a":
         return [(f, r) for f, r in base if not f.startswith("--policy.cameras=")] + [
-            ("--policy.cameras=" + json_list(CAMERA_A), "ablation: one view, camera A (its own 50 episodes)")
+            (
+                "--policy.cameras=" + json_list(CAMERA_A),
+                f"ablation: one view, camera A ({p.episodes} episodes)",
+            )
         ]
     raise ValueError(f"ablation: expected one of {list(ABLATIONS)}, got {name!r}")
 
@@ -309,7 +278,7 @@ class Run:
     this one reads; an eval run carries ``result`` = (model, task, setting) and its eval ``seed``."""
 
     name: str
-    kind: str  # "record" | "train" | "eval"
+    kind: str  # "record" | "train" | "eval" | "prepare"
     cmd: tuple[str, ...]
     output: Path
     needs: tuple[str, ...] = ()
@@ -324,6 +293,8 @@ def is_done(run: Run) -> bool:
         return recorded_episodes(run.output) >= run.episodes
     if run.kind == "train":
         return is_trained(run.output)
+    if run.kind == "prepare":
+        return (run.output / "config.json").is_file()
     return is_evaluated(run.output)
 
 
@@ -397,18 +368,17 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     for method in p.methods:
         if method in NOT_FINETUNABLE:
             continue
-        base = out / "train" / method / TASK0 / CHECKPOINT_SUBDIR
+        start, start_run = out / "train" / method / TASK0 / CHECKPOINT_SUBDIR, f"train/{method}/{TASK0}"
+        if method != "omnid" and fewshot_tasks:  # a copy whose image input is camera A
+            src, start = start, out / "finetune" / method / "start_cam_a"
+            cmd = [sys.executable, "-m", "lerobot_omnid.checkpoint_cameras", "--src", str(src)]
+            cmd += ["--dst", str(start), "--cameras", ",".join(CAMERA_A)]
+            runs.append(Run(f"prepare/{method}/cam_a", "prepare", tuple(cmd), start, (start_run,)))
+            start_run = runs[-1].name
         for task in fewshot_tasks:
-            flags = [f"--policy.path={base}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
-            flags += [f for f, _ in finetune_flags(method, p)]
-            trained = train(
-                "finetune",
-                method,
-                task,
-                f"{task}_a_fewshot",
-                flags,
-                p.finetune_steps,
-                needs=(f"train/{method}/{TASK0}",),
-            )
-            evaluate(trained, method, task, (FEWSHOT,), CAMERA_A)
+            flags = [f"--policy.path={start}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
+            flags += [f for f, _ in finetune_flags(method, p) if not f.startswith("--policy.path=")]
+            dataset = f"{task}_a_fewshot"
+            tuned = train("finetune", method, task, dataset, flags, p.finetune_steps, needs=(start_run,))
+            evaluate(tuned, method, task, (FEWSHOT,), CAMERA_A)
     return runs

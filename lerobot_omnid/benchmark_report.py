@@ -80,7 +80,7 @@ def _bold_best(rows: list[list[str]], columns: Iterable[int]) -> None:
     """Bold the highest number of each column (ties included), as the paper does."""
     for c in columns:
         values = [float(r[c]) for r in rows if r[c] not in (MISSING, NOT_APPLICABLE) and "/" not in r[c]]
-        if len(values) < 2:
+        if len(values) < 2 or min(values) == max(values):
             continue
         for r in rows:
             if r[c] not in (MISSING, NOT_APPLICABLE) and "/" not in r[c] and float(r[c]) == max(values):

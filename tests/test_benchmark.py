@@ -16,6 +16,7 @@ import gym_omnid.constants
 import pytest
 
 import lerobot_omnid.benchmark as bench
+from lerobot_omnid import checkpoint_cameras
 from lerobot_omnid.benchmark_plan import (
     PROFILES,
     SETTINGS,
@@ -90,7 +91,11 @@ def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
 
 def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
     p = PROFILES["paper"]
-    runs = by_name(build_plan(p, tmp_path, available_tasks()))
+    plan = build_plan(p, tmp_path, available_tasks())
+    runs = by_name(plan)
+    assert len(runs) == len(plan)  # unique names
+    for i, run in enumerate(plan):  # every run needs only runs that come before it
+        assert set(run.needs) <= {r.name for r in plan[:i]}, run.name
     for task in available_tasks():
         for m in ("omnid", "diffusion", "act", "vqbet"):
             assert flag(runs[f"train/{m}/{task}"].cmd, "steps") == "100000"
@@ -114,15 +119,23 @@ def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
     for m in ("omnid", "act", "vqbet"):
         for task in (TASK0, TASK1):
             run = runs[f"finetune/{m}/{task}"]
-            assert flag(run.cmd, "policy.path") == str(
-                tmp_path / "train" / m / TASK0 / "checkpoints" / "last" / "pretrained_model"
-            )
-            assert f"train/{m}/{TASK0}" in run.needs
             assert flag(run.cmd, "dataset.root") == str(tmp_path / "data" / f"{task}_a_fewshot")
             assert flag(run.cmd, "steps") == "5000" and flag(run.cmd, "policy.type") is None
             assert flag(runs[f"eval/{m}/{task}/fewshot_a/seed1"].cmd, "env.cameras") == "[cam_a]"
-    assert flag(runs["finetune/omnid/select_apple"].cmd, "policy.cameras") == '["cam_a"]'
-    assert "cam_a" in flag(runs["finetune/act/select_chemistry_tube"].cmd, "policy.input_features")
+    task0_checkpoint = str(tmp_path / "train" / "omnid" / TASK0 / "checkpoints" / "last" / "pretrained_model")
+    omnid = runs["finetune/omnid/select_apple"]
+    assert flag(omnid.cmd, "policy.path") == task0_checkpoint and "train/omnid/select_apple" in omnid.needs
+    assert flag(omnid.cmd, "policy.cameras") == '["cam_a"]'
+    for m in ("act", "vqbet"):  # a copy of the task-0 checkpoint with camera A as its image input
+        prepare = runs[f"prepare/{m}/cam_a"]
+        assert prepare.needs == (f"train/{m}/{TASK0}",)
+        assert prepare.cmd[prepare.cmd.index("--src") + 1] == task0_checkpoint.replace("/omnid/", f"/{m}/")
+        assert prepare.cmd[prepare.cmd.index("--cameras") + 1] == "cam_a"
+        for task in (TASK0, TASK1):
+            run = runs[f"finetune/{m}/{task}"]
+            assert flag(run.cmd, "policy.path") == str(prepare.output) and prepare.name in run.needs
+            assert flag(run.cmd, "policy.input_features") is None
+    assert flag(runs["finetune/vqbet/select_apple"].cmd, "policy.n_vqvae_training_steps") == "0"
     assert not any(name.startswith("finetune/diffusion") for name in runs)
     assert flag(runs["record/select_apple_a_fewshot"].cmd, "seed") is None  # omnid-record: "--seed N"
     record = runs["record/select_chemistry_tube_a_fewshot"].cmd
@@ -251,7 +264,8 @@ def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, ca
     monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
     assert bench.main(["--profile", "paper", "--dry-run", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert out.count("lerobot-train ") == 17 and "n/a" in out and "Plan: " in out
+    assert out.count("lerobot-train ") == 17 and out.count("checkpoint_cameras --src") == 2
+    assert "n/a" in out and "Plan: " in out
     assert not any(tmp_path.iterdir())
 
 
@@ -377,3 +391,50 @@ def test_real_tools_end_to_end_tiny(tmp_path):
     assert set(cells) == {("omnid", "id"), ("diffusion", "id")}
     assert all(c["episodes"] == 1 for c in cells.values())
     assert "| Method | Select Apple | Average |" in (out / "report.md").read_text()
+
+
+def test_checkpoint_copy_with_other_cameras(tmp_path, capsys):
+    src = tmp_path / "pretrained_model"
+    src.mkdir()
+    image = {"type": "VISUAL", "shape": [3, 64, 64]}
+    features = {"observation.state": {"type": "STATE", "shape": [16]}}
+    features |= {f"observation.images.cam_{c}": image for c in "bcde"}
+    (src / "config.json").write_text(
+        json.dumps({"type": "act", "input_features": features, "chunk_size": 16})
+    )
+    (src / "model.safetensors").write_bytes(b"weights")
+    dst = tmp_path / "copy"
+    assert checkpoint_cameras.main(["--src", str(src), "--dst", str(dst), "--cameras", "cam_a"]) == 0
+    config = json.loads((dst / "config.json").read_text())
+    assert config["input_features"] == {
+        "observation.state": features["observation.state"],
+        "observation.images.cam_a": image,
+    }
+    assert config["chunk_size"] == 16 and (dst / "model.safetensors").read_bytes() == b"weights"
+    assert json.loads((src / "config.json").read_text())["input_features"] == features  # source untouched
+    with pytest.raises(SystemExit):
+        checkpoint_cameras.main(["--src", str(tmp_path / "nowhere"), "--dst", str(dst), "--cameras", "cam_a"])
+    assert "--src" in capsys.readouterr().err
+
+
+def test_ctrl_c_keeps_finished_runs_and_writes_the_report(monkeypatch, tmp_path, capsys):
+    calls: list[str] = []
+    fake = _fake_tools(calls, {"omnid": 50.0})
+
+    def interrupt_second_eval(cmd, log_path, on_line=None):
+        if calls.count("lerobot-eval") == 1 and Path(cmd[0]).name == "lerobot-eval":
+            raise KeyboardInterrupt
+        return fake(cmd, log_path, on_line)
+
+    monkeypatch.setattr(bench, "run_logged", interrupt_second_eval)
+    assert bench.main(["--out", str(tmp_path)]) == 130
+    assert "Interrupted" in capsys.readouterr().out
+    assert "| OmniD | 50.0 |" in (tmp_path / "report.md").read_text()
+    calls.clear()
+    monkeypatch.setattr(bench, "run_logged", fake)
+    assert bench.main(["--out", str(tmp_path)]) == 0
+    assert (
+        calls.count("lerobot-train") == 1
+        and calls.count("lerobot-eval") == 11
+        and "omnid-record" not in calls
+    )
