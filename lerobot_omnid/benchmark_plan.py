@@ -170,6 +170,7 @@ def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
             flags += [
                 ("--policy.d_model=64", "CPU size: OFG width 64 (paper 128)"),
                 ("--policy.num_layers=2", "CPU size: 2 OFG layers (paper 6)"),
+                ("--policy.checkpoint_sampling=false", "memory is no concern at this size: no recomputation"),
             ]
         return flags + diffusion_head_flags(p)
     if method == "diffusion":
