@@ -53,7 +53,7 @@ PROFILES = {
     "cpu": Profile(
         episodes=20,
         image_size=96,
-        steps=800,  # about 1.3 s a step on 2 cores: ~18 minutes
+        steps=600,  # about 1.3 s a step on 2 cores: ~13 minutes
         batch_size=8,
         eval_episodes=10,  # about 7 s an episode of 200 steps
         policy_flags=(
