@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ACTION_DIM, STATE_DIM, tiny_config
 from gym_omnid.calibration import mujoco_camera_calibration
 from gym_omnid.constants import CAMERA_FOVY
 from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
+from omnid_testing import ACTION_DIM, STATE_DIM, tiny_config
 
 import lerobot_omnid.calibration_file as calibration_file
 from lerobot_omnid.attach_calibration import main

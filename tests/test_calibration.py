@@ -3,7 +3,7 @@
 import copy
 
 import pytest
-from conftest import synthetic_calibration
+from omnid_testing import synthetic_calibration
 
 from lerobot_omnid.calibration import CalibrationError, CameraCalibration, calibration_from_feature_info
 

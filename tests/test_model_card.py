@@ -3,8 +3,8 @@
 import json
 from types import SimpleNamespace
 
-from conftest import tiny_config
 from huggingface_hub import ModelCard
+from omnid_testing import tiny_config
 
 from lerobot_omnid.modeling_omnid import OmniDPolicy
 

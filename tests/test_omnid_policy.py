@@ -4,8 +4,8 @@ import json
 
 import pytest
 import torch
-from conftest import ACTION_DIM, STATE_DIM, random_batch, synthetic_calibration, tiny_config
 from lerobot.configs.types import FeatureType, PolicyFeature
+from omnid_testing import ACTION_DIM, STATE_DIM, random_batch, synthetic_calibration, tiny_config
 
 from lerobot_omnid.calibration import CalibrationError
 from lerobot_omnid.configuration_omnid import OmniDConfig

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 import torch
-from conftest import make_tiny_dataset
+from omnid_testing import make_tiny_dataset
 
 from lerobot_omnid.modeling_omnid import OmniDPolicy
 

@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 import pytest
 import torch
-from conftest import make_tiny_dataset, tiny_config
+from omnid_testing import make_tiny_dataset, tiny_config
 from PIL import Image
 
 from lerobot_omnid.calibration import CameraCalibration

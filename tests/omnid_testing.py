@@ -1,0 +1,118 @@
+"""Shared test helpers: synthetic calibrated cameras, tiny OmniD configs and datasets.
+
+A plain module (not conftest.py): ``tests/envs`` has a conftest of its own, and ``from conftest import``
+would resolve to whichever was imported first.
+"""
+
+from __future__ import annotations
+
+import torch
+from lerobot.configs.types import FeatureType, PolicyFeature
+
+from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.geometry import look_at
+
+# Camera eyes around a table whose workspace is centred at (0.5, 0, 0) in the robot base frame.
+SYNTHETIC_EYES = {
+    "cam_a": (0.1, 0.0, 1.1),
+    "cam_b": (1.3, 0.0, 0.6),
+    "cam_c": (0.5, 0.8, 0.6),
+    "cam_d": (0.5, -0.8, 0.6),
+    "cam_e": (-0.2, 0.0, 0.8),
+}
+WORKSPACE_CENTRE = (0.5, 0.0, 0.0)
+STATE_DIM = 10
+ACTION_DIM = 10
+
+
+def synthetic_calibration(cam: str, size: int = 64, target=WORKSPACE_CENTRE) -> dict:
+    """Calibration dict of a pinhole camera (90 degree field of view) looking at the workspace."""
+    eye = torch.tensor(SYNTHETIC_EYES[cam], dtype=torch.float64)
+    cam_T_world = look_at(eye, torch.tensor(target, dtype=torch.float64))
+    f = size / 2
+    K = [[f, 0.0, (size - 1) / 2], [0.0, f, (size - 1) / 2], [0.0, 0.0, 1.0]]
+    return {"K": K, "T_cam_world": cam_T_world.tolist(), "image_size": [size, size]}
+
+
+def tiny_config(cams=("cam_b", "cam_c", "cam_d", "cam_e"), size: int = 64, **overrides) -> OmniDConfig:
+    """A small OmniD config (CPU-friendly) with synthetic calibrated cameras."""
+    keys = [f"observation.images.{c}" for c in cams]
+    kwargs = {
+        "input_features": {
+            "observation.state": PolicyFeature(FeatureType.STATE, (STATE_DIM,)),
+            **{k: PolicyFeature(FeatureType.VISUAL, (3, size, size)) for k in keys},
+        },
+        "output_features": {"action": PolicyFeature(FeatureType.ACTION, (ACTION_DIM,))},
+        "camera_calibration": {k: synthetic_calibration(c, size) for k, c in zip(keys, cams, strict=True)},
+        "volume_bounds": ((0.2, 0.8), (-0.3, 0.3), (0.0, 0.3)),
+        "volume_shape": (8, 8, 4),
+        "d_model": 32,
+        "num_heads": 2,
+        "num_layers": 2,
+        "ffn_dim": 64,
+        "dropout": 0.0,
+        "down_dims": (32, 64),
+        "backbone_layer": 3,
+        "noise_scheduler_type": "DDIM",
+        "num_inference_steps": 3,
+        "device": "cpu",
+        "push_to_hub": False,
+    }
+    kwargs.update(overrides)
+    return OmniDConfig(**kwargs)
+
+
+def random_batch(config: OmniDConfig, batch_size: int = 2, generator: torch.Generator | None = None) -> dict:
+    """A training batch matching ``config`` (images in [0, 1], normalised state and action)."""
+    T = config.n_obs_steps
+    batch = {
+        key: torch.rand(batch_size, T, *ft.shape, generator=generator)
+        for key, ft in config.image_features.items()
+    }
+    batch["observation.state"] = torch.randn(batch_size, T, STATE_DIM, generator=generator)
+    batch["action"] = torch.randn(batch_size, config.horizon, ACTION_DIM, generator=generator)
+    batch["action_is_pad"] = torch.zeros(batch_size, config.horizon, dtype=torch.bool)
+    return batch
+
+
+def make_tiny_dataset(
+    root,
+    cams=("cam_a", "cam_b", "cam_c", "cam_d", "cam_e"),
+    size: int = 64,
+    episodes: int = 2,
+    frames: int = 20,
+):
+    """A small LeRobotDataset written by ``LeRobotDataset.create``: random video cameras with calibration
+    in their feature info, random state and action."""
+    import numpy as np
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    features = {
+        "observation.state": {
+            "dtype": "float32",
+            "shape": (STATE_DIM,),
+            "names": [f"s{i}" for i in range(STATE_DIM)],
+        },
+        "action": {"dtype": "float32", "shape": (ACTION_DIM,), "names": [f"a{i}" for i in range(ACTION_DIM)]},
+    }
+    for cam in cams:
+        features[f"observation.images.{cam}"] = {
+            "dtype": "video",
+            "shape": (size, size, 3),
+            "names": ["height", "width", "channels"],
+            "info": {"calibration": synthetic_calibration(cam, size)},
+        }
+    dataset = LeRobotDataset.create("local/tiny", fps=10, features=features, root=root, use_videos=True)
+    rng = np.random.default_rng(0)
+    for _ in range(episodes):
+        for _ in range(frames):
+            frame = {
+                f"observation.images.{c}": rng.integers(0, 256, (size, size, 3), dtype=np.uint8) for c in cams
+            }
+            frame["observation.state"] = rng.standard_normal(STATE_DIM).astype(np.float32)
+            frame["action"] = rng.standard_normal(ACTION_DIM).astype(np.float32)
+            frame["task"] = "put the apple in the bowl"
+            dataset.add_frame(frame)
+        dataset.save_episode()
+    dataset.finalize()
+    return dataset
