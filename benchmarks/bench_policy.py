@@ -105,10 +105,9 @@ def build_policy(name: str, profile: Profile, device: str):
     return DiffusionPolicy(config)
 
 
-def measure(name: str, profile_name: str, device: str, repeats: int, queue: mp.Queue) -> None:
+def measure(name: str, profile: Profile, device: str, repeats: int, queue: mp.Queue) -> None:
     """Runs in a fresh process: train step time, select_action latency, peak memory of one policy."""
     torch.manual_seed(0)
-    profile = PROFILES[profile_name]
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB on Linux
     policy = build_policy(name, profile, device).to(device)
     n_params = sum(p.numel() for p in policy.parameters())
@@ -174,19 +173,35 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="measured repetitions after one warm-up")
     parser.add_argument("--policies", default="omnid,diffusion")
     parser.add_argument("--json", help="also write the results to this file")
+    parser.add_argument(
+        "--omnid",
+        action="append",
+        default=[],
+        metavar="FIELD=JSON",
+        help="override an OmniDConfig field, e.g. --omnid checkpoint_backbone=true (repeatable)",
+    )
     args = parser.parse_args()
 
-    profile = PROFILES[args.profile]
+    base = PROFILES[args.profile]
+    overrides = {}
+    for item in args.omnid:
+        field, sep, value = item.partition("=")
+        if not sep:
+            parser.error(f"--omnid: expected FIELD=JSON, got {item!r}")
+        overrides[field] = json.loads(value)
+    profile = Profile(
+        base.image_size, base.batch_size, {**base.omnid, **overrides}, base.diffusion, base.inference_steps
+    )
     print(
         f"profile={args.profile} device={args.device} cameras={len(CAMERAS)} image={profile.image_size}x"
         f"{profile.image_size} batch={profile.batch_size} obs_steps=2 horizon=16 "
-        f"DDIM steps={profile.inference_steps} repeats={args.repeats}"
+        f"DDIM steps={profile.inference_steps} repeats={args.repeats} omnid overrides={overrides or 'none'}"
     )
     ctx = mp.get_context("spawn")
     results = []
     for name in args.policies.split(","):
         queue = ctx.Queue()
-        proc = ctx.Process(target=measure, args=(name, args.profile, args.device, args.repeats, queue))
+        proc = ctx.Process(target=measure, args=(name, profile, args.device, args.repeats, queue))
         proc.start()
         proc.join()
         if proc.exitcode != 0:
