@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: install system-deps test test-all demo lint
+.PHONY: install system-deps test test-fast demo lint
 
 # FFmpeg's shared libraries let LeRobot decode videos with torchcodec; without them LeRobot prints a
 # long traceback and falls back to PyAV. Installed with apt-get when we are root, otherwise explained.
@@ -25,11 +25,13 @@ $(VENV)/.installed: pyproject.toml
 
 install: system-deps $(VENV)/.installed
 
+# The whole suite, slow end-to-end tests included (about 11 minutes on 2 cores); what CI runs.
 test: install
-	$(BIN)/python -m pytest -q -m "not slow"
-
-test-all: install
 	$(BIN)/python -m pytest -q
+
+# Without the tests marked slow (about 2 minutes).
+test-fast: install
+	$(BIN)/python -m pytest -q -m "not slow"
 
 lint: install
 	$(BIN)/ruff check .
