@@ -102,16 +102,7 @@ ACTION_POS_HIGH = (1.0, 0.7, 0.8)  # m
 # State (agent_pos): measured TCP position (m), its 6D orientation (same encoding as the action),
 # gripper closure in [0, 1] (0 open, 1 pads touching; same convention as the action), arm joints (rad).
 STATE_NAMES = (
-    "ee_x",
-    "ee_y",
-    "ee_z",
-    "ee_r00",
-    "ee_r10",
-    "ee_r20",
-    "ee_r01",
-    "ee_r11",
-    "ee_r21",
-    "gripper",
+    *ACTION_NAMES,  # the measured counterparts of the commanded pose and gripper
     *(f"{name}_pos" for name in ARM_JOINTS),
 )
 STATE_DIM = len(STATE_NAMES)
