@@ -34,9 +34,11 @@ from lerobot_omnid.benchmark_plan import (
     BACKGROUND_OODS,
     EVAL_SEED_STRIDE,
     FEWSHOT_SEED,
+    HELDOUT_SEED,
     LABELS,
     METHODS,
     NOT_FINETUNABLE,
+    OFFLINE_OUTPUT,
     PROFILES,
     SETTINGS,
     TASK0,
@@ -61,6 +63,7 @@ OVERRIDES = {  # option: (profile field, minimum)
     "finetune_steps": ("finetune_steps", 1),
     "batch_size": ("batch_size", 1),
     "eval_episodes": ("eval_episodes", 1),
+    "heldout_episodes": ("heldout_episodes", 0),
     "episode_length": ("episode_length", 1),
     "image_size": ("image_size", 16),
     "num_workers": ("num_workers", 0),
@@ -87,6 +90,9 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         if p.fewshot
         else "- Few-shot fine-tuning: not in this profile.",
         "- Cells pool the episodes of all eval seeds; `—`: not run (yet); `n/a`: not applicable.",
+        f"- Open-loop diagnostic: {p.heldout_episodes} held-out expert episodes per {TASK0} setting."
+        if p.heldout_episodes
+        else "- Open-loop diagnostic: off.",
         "",
         "| Method | Option | Why |",
         "| --- | --- | --- |",
@@ -169,7 +175,10 @@ def execute(runs: list[Run], out: Path, verbose: bool) -> tuple[dict[str, str], 
 
 def write_outputs(p: BenchmarkProfile, tasks: tuple[str, ...], runs: list[Run], out: Path) -> dict:
     """report.md, benchmark.png and results.json from the eval_info.json files found now."""
-    entries = [report.EvalEntry(r.result, r.seed, r.output / "eval_info.json") for r in runs if r.result]
+    entries = [
+        report.EvalEntry(r.result, r.seed, r.output / "eval_info.json") for r in runs if r.kind == "eval"
+    ]
+    offline = {r.result: r.output / OFFLINE_OUTPUT for r in runs if r.kind == "offline"}
     results = report.collect(entries)
     n_a = {(m, t, "fewshot_a") for m in NOT_FINETUNABLE for t in (TASK0, TASK1)} if p.fewshot else set()
     chart = report.bar_chart(
@@ -181,6 +190,19 @@ def write_outputs(p: BenchmarkProfile, tasks: tuple[str, ...], runs: list[Run], 
     if TASK0 in tasks:
         lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
         lines += report.generalisation_table(results, p.methods, TASK0, TASK1, BACKGROUND_OODS, n_a, LABELS)
+    if offline:
+        lines += [
+            "",
+            f"## Task 0 ({TASK0}): open-loop action error on held-out expert episodes",
+            "",
+            f"Diagnostic next to the success rates: {p.heldout_episodes} expert episodes per setting "
+            f"(env seeds from {HELDOUT_SEED}, never trained on) replayed through each policy as "
+            "`lerobot-eval` runs it (`omnid-offline-eval`); mean TCP position error (cm) / gripper error "
+            "(0..1) of its action at every frame against the expert's. Lower is better; informative even "
+            "when every success rate is 0.",
+            "",
+        ]
+        lines += report.offline_table(offline, p.methods, TASK0, p.settings, LABELS)
     if p.ablations:
         lines += ["", f"## Ablation: OmniD on task 0 ({TASK0}), ID success rate (%)", ""]
         lines += report.ablation_table(results, TASK0)
@@ -273,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     out = (args.out or Path(f"outputs/benchmark_{p.name}")).resolve()
     runs = build_plan(p, out, tasks)
     print("\n".join(settings_markdown(p, tasks)))
-    kinds = {k: sum(r.kind == k for r in runs) for k in ("record", "prepare", "train", "eval")}
+    kinds = {k: sum(r.kind == k for r in runs) for k in ("record", "prepare", "train", "eval", "offline")}
     per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
     todo = sum(not is_done(r) for r in runs)
     print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run; {out}")

@@ -17,8 +17,8 @@ from pathlib import Path
 import gym_omnid.constants
 from gym_omnid.constants import STATE_DIM
 
-from lerobot_omnid.commands import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.commands import (
+    BIN,
     SIM_VOLUME_BOUNDS,
     TRAIN_CAMERAS,
     eval_command,
@@ -29,6 +29,7 @@ from lerobot_omnid.commands import (
     recorded_episodes,
     train_command,
 )
+from lerobot_omnid.commands import CHECKPOINT as CHECKPOINT_SUBDIR
 
 METHODS = ("omnid", "diffusion", "act", "vqbet")
 """LeRobot policy types, in the order of the paper's tables."""
@@ -52,6 +53,8 @@ VQBET_CAMERA = ("cam_b",)  # LeRobot's VQ-BeT takes exactly one image
 TRAIN_SEED = 1000  # lerobot-train --seed of every run (LeRobot's default): same init RNG and batch order
 EVAL_SEED_STRIDE = 1000  # eval seed k runs env seeds k*1000 ... k*1000 + episodes - 1
 FEWSHOT_SEED = 100_000  # first env seed of the few-shot recordings (training sets start at 0)
+HELDOUT_SEED = 200_000  # first env seed of the held-out expert recordings of the open-loop diagnostic
+OFFLINE_OUTPUT = "offline_eval.json"  # written by omnid-offline-eval into an offline run's folder
 NOT_FINETUNABLE = {
     "diffusion": "LeRobot's Diffusion Policy conditions its UNet on (cameras x 64 keypoint features + "
     "state): a four-camera checkpoint has no weights for one camera's input, so it cannot be fine-tuned "
@@ -76,6 +79,7 @@ class BenchmarkProfile:
     finetune_steps: int
     batch_size: int
     eval_episodes: int  # per setting and eval seed
+    heldout_episodes: int  # held-out expert episodes per task-0 setting for the open-loop action error
     eval_seeds: tuple[int, ...]
     episode_length: int  # time limit of an evaluation episode, env steps (10 per second)
     settings: tuple[str, ...]  # evaluation settings of task 0; other tasks are evaluated ID
@@ -90,13 +94,15 @@ class BenchmarkProfile:
 PROFILES = {
     "mini": BenchmarkProfile(
         name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
-        image_size=96, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, eval_seeds=(1,),
+        image_size=96, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, heldout_episodes=10,
+        eval_seeds=(1,),
         episode_length=200, settings=SETTINGS, fewshot=False, ablations=False, device="cpu", num_workers=2,
         small=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
-        steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, eval_seeds=(1, 2, 3, 4),
+        steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, heldout_episodes=20,
+        eval_seeds=(1, 2, 3, 4),
         episode_length=200, settings=SETTINGS, fewshot=True, ablations=True, device="cuda", num_workers=8,
         small=False,
     ),
@@ -260,6 +266,11 @@ def ablation_flags(name: str, p: BenchmarkProfile) -> list[Flag]:
     raise ValueError(f"ablation: expected one of {list(ABLATIONS)}, got {name!r}")
 
 
+def heldout_dataset(task: str, setting: str) -> str:
+    """Name of the held-out expert recording (cameras B-E) of ``task`` in ``setting``."""
+    return f"{task}_bcde_heldout_{setting}"
+
+
 def setting_env(setting: str) -> tuple[str, str]:
     """(layout, background) of an evaluation setting."""
     if setting in ("id", FEWSHOT):
@@ -276,10 +287,11 @@ def setting_env(setting: str) -> tuple[str, str]:
 @dataclass(frozen=True)
 class Run:
     """One command of the plan. ``name`` is unique (and names the log); ``needs`` lists runs whose output
-    this one reads; an eval run carries ``result`` = (model, task, setting) and its eval ``seed``."""
+    this one reads; an eval run carries ``result`` = (model, task, setting) and its eval ``seed``, an offline
+    run (open-loop action error on held-out expert episodes, ``omnid-offline-eval``) its ``result``."""
 
     name: str
-    kind: str  # "record" | "train" | "eval" | "prepare"
+    kind: str  # "record" | "train" | "eval" | "prepare" | "offline"
     cmd: tuple[str, ...]
     output: Path
     needs: tuple[str, ...] = ()
@@ -296,6 +308,8 @@ def is_done(run: Run) -> bool:
         return is_trained(run.output)
     if run.kind == "prepare":
         return (run.output / "config.json").is_file()
+    if run.kind == "offline":
+        return (run.output / OFFLINE_OUTPUT).is_file()
     return is_evaluated(run.output)
 
 
@@ -303,9 +317,12 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     """Every run of the benchmark. Each model's evaluations follow its training, so results come early."""
     runs: list[Run] = []
 
-    def record(name: str, task: str, cameras: Sequence[str], episodes: int, seed: int) -> None:
+    def record(
+        name: str, task: str, cameras: Sequence[str], episodes: int, seed: int, setting: str = "id"
+    ) -> None:
         root = out / "data" / name
-        cmd = record_command(task, episodes, cameras, p.image_size, root, seed=seed)
+        layout, background = setting_env(setting)
+        cmd = record_command(task, episodes, cameras, p.image_size, root, seed, layout, background)
         runs.append(Run(f"record/{name}", "record", tuple(cmd), root, episodes=episodes))
 
     def train(
@@ -343,6 +360,27 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
                     Run(name, "eval", tuple(cmd), output, (trained.name,), 0, (model, task, setting), k)
                 )
 
+    def offline(trained: Run, model: str, task: str, settings: Sequence[str]) -> None:
+        """Open-loop action error of ``trained`` on the held-out expert episodes of each setting."""
+        for setting in settings:
+            dataset = heldout_dataset(task, setting)
+            output = out / "offline" / model / task / setting
+            cmd = [str(BIN / "omnid-offline-eval"), "--checkpoint", str(trained.output / CHECKPOINT_SUBDIR)]
+            cmd += ["--root", str(out / "data" / dataset), "--device", p.device]
+            cmd += ["--out", str(output / OFFLINE_OUTPUT)]
+            needs = (trained.name, f"record/{dataset}")
+            runs.append(
+                Run(
+                    f"offline/{model}/{task}/{setting}",
+                    "offline",
+                    tuple(cmd),
+                    output,
+                    needs,
+                    0,
+                    (model, task, setting),
+                )
+            )
+
     def common(method: str) -> list[str]:
         return [f"--policy.type={method}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
 
@@ -353,6 +391,11 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     fewshot_tasks = (TASK0, TASK1) if p.fewshot and TASK0 in tasks else ()
     for task in fewshot_tasks:
         record(f"{task}_a_fewshot", task, CAMERA_A, p.fewshot_episodes, seed=FEWSHOT_SEED)
+    heldout_settings = p.settings if p.heldout_episodes and TASK0 in tasks else ()
+    for setting in heldout_settings:
+        record(
+            heldout_dataset(TASK0, setting), TASK0, TRAIN_CAMERAS, p.heldout_episodes, HELDOUT_SEED, setting
+        )
 
     for task in tasks:
         for method in p.methods:
@@ -360,6 +403,8 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
             trained = train("train", method, task, f"{task}_bcde", [*common(method), *flags], p.steps)
             cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
             evaluate(trained, method, task, p.settings if task == TASK0 else ("id",), cameras)
+            if task == TASK0:
+                offline(trained, method, task, heldout_settings)
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
             flags = [f for f, _ in ablation_flags(name, p)]

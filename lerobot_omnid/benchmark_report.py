@@ -164,6 +164,35 @@ def ablation_table(results: Mapping[Key, CellResult], task0: str) -> list[str]:
     return _table(["", *(title for title, _, _ in ABLATION_COLUMNS)], [*rows, success])
 
 
+def offline_table(
+    paths: Mapping[Key, Path],
+    methods: Sequence[str],
+    task0: str,
+    settings: Sequence[str],
+    labels: Mapping[str, str],
+) -> list[str]:
+    """Task 0: mean open-loop TCP position error (cm) / gripper error on held-out expert episodes per setting,
+    from ``omnid-offline-eval``'s JSON files (``paths``, keyed by cell). The lowest position error is bold."""
+    rows = []
+    for m in methods:
+        row = [labels.get(m, m)]
+        for setting in settings:
+            path = paths.get((m, task0, setting))
+            if path is None or not path.is_file():
+                row.append(MISSING)
+                continue
+            result = json.loads(path.read_text())
+            row.append(f"{result['position_cm']:.1f} / {result['gripper']:.2f}")
+        rows.append(row)
+    for c in range(1, len(settings) + 1):
+        errors = [float(r[c].split(" / ")[0]) for r in rows if r[c] != MISSING]
+        if len(errors) >= 2 and min(errors) < max(errors):
+            for r in rows:
+                if r[c] != MISSING and float(r[c].split(" / ")[0]) == min(errors):
+                    r[c] = f"**{r[c]}**"
+    return _table(["Method", *settings], rows)
+
+
 def raw_table(entries: Sequence[EvalEntry], labels: Mapping[str, str]) -> list[str]:
     """One row per evaluation run: its cell, seed, result and eval_info.json (or that it is missing)."""
     rows = []

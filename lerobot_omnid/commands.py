@@ -37,6 +37,7 @@ def record_command(
     root: Path,
     seed: int = 0,
     layout: str = "id",
+    background: str = "id",
 ) -> list[str]:
     return [
         str(BIN / "omnid-record"),
@@ -50,6 +51,8 @@ def record_command(
         str(image_size),
         "--layout",
         layout,
+        "--background",
+        background,
         "--seed",
         str(seed),
         "--root",

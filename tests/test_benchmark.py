@@ -18,6 +18,7 @@ import pytest
 import lerobot_omnid.benchmark as bench
 from lerobot_omnid import checkpoint_cameras
 from lerobot_omnid.benchmark_plan import (
+    HELDOUT_SEED,
     PROFILES,
     SETTINGS,
     TASK0,
@@ -33,6 +34,7 @@ from lerobot_omnid.benchmark_report import (
     collect,
     generalisation_table,
     id_table,
+    offline_table,
     raw_table,
 )
 
@@ -52,7 +54,7 @@ def by_name(runs):
 
 def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
     runs = build_plan(PROFILES["mini"], tmp_path, (TASK0,))
-    assert [r.kind for r in runs].count("record") == 1
+    assert [r.kind for r in runs].count("record") == 1 + len(SETTINGS)  # training set + held-out sets
     trains = [r for r in runs if r.kind == "train"]
     evals = [r for r in runs if r.kind == "eval"]
     assert [r.name for r in trains] == ["train/omnid/select_apple", "train/diffusion/select_apple"]
@@ -87,6 +89,28 @@ def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
     assert {flag(omnid, f"policy.{h}") for h in head} == {flag(dp, f"policy.{h}") for h in head}
     for r in evals:  # each eval reads the checkpoint of its own training run
         assert flag(r.cmd, "policy.path").startswith(str(tmp_path / "train" / r.result[0]))
+
+
+def test_mini_plan_open_loop_diagnostic_on_held_out_episodes(tmp_path):
+    runs = by_name(build_plan(PROFILES["mini"], tmp_path, (TASK0,)))
+    for setting, (layout, background) in {
+        "position_ood": ("position_ood", "id"),
+        "ood3": ("id", "ood3"),
+    }.items():
+        record = runs[f"record/{TASK0}_bcde_heldout_{setting}"].cmd
+        option = {name: record[record.index(name) + 1] for name in ("--layout", "--background", "--seed")}
+        assert option == {"--layout": layout, "--background": background, "--seed": str(HELDOUT_SEED)}
+        assert record[record.index("--cameras") + 1] == "cam_b,cam_c,cam_d,cam_e"
+        for method in ("omnid", "diffusion"):
+            run = runs[f"offline/{method}/{TASK0}/{setting}"]
+            assert run.needs == (f"train/{method}/{TASK0}", f"record/{TASK0}_bcde_heldout_{setting}")
+            cmd = run.cmd
+            assert Path(cmd[0]).name == "omnid-offline-eval" and run.result == (method, TASK0, setting)
+            assert cmd[cmd.index("--checkpoint") + 1].startswith(str(tmp_path / "train" / method))
+            assert cmd[cmd.index("--root") + 1] == str(tmp_path / "data" / f"{TASK0}_bcde_heldout_{setting}")
+    assert bench.FEWSHOT_SEED + PROFILES["paper"].fewshot_episodes <= HELDOUT_SEED  # never trained on
+    no_heldout = dataclasses.replace(PROFILES["mini"], heldout_episodes=0)
+    assert not any(r.kind == "offline" for r in build_plan(no_heldout, tmp_path, (TASK0,)))
 
 
 def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
@@ -191,6 +215,11 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
             (root / "meta" / "info.json").write_text(
                 json.dumps({"total_episodes": int(cmd[cmd.index("--episodes") + 1])})
             )
+        elif tool == "omnid-offline-eval":
+            out = Path(cmd[cmd.index("--out") + 1])  # .../offline/<model>/<task>/<setting>/offline_eval.json
+            out.parent.mkdir(parents=True, exist_ok=True)
+            error = 10.0 - rates.get(out.parents[2].name, 0.0) / 10.0
+            out.write_text(json.dumps({"position_cm": error, "gripper": 0.25}))
         elif tool == "lerobot-train":
             ckpt = Path(flag(cmd, "output_dir")) / "checkpoints" / "last" / "pretrained_model"
             ckpt.mkdir(parents=True)
@@ -215,7 +244,7 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
     out = tmp_path / "bench"
     assert bench.main(["--out", str(out)]) == 0
-    assert calls.count("omnid-record") == 1 and calls.count("lerobot-train") == 2
+    assert calls.count("omnid-record") == 7 and calls.count("lerobot-train") == 2
     assert calls.count("lerobot-eval") == 12
     report = (out / "report.md").read_text()
     assert "| OmniD | **60.0** | 60.0 |" in report  # ID table: best per task in bold, then the average
@@ -224,7 +253,10 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     assert (out / "benchmark.png").stat().st_size > 0
     cells = json.loads((out / "results.json").read_text())["cells"]
     assert len(cells) == 12 and all(Path(c["eval_info"][0]).is_file() for c in cells)
-    assert "15 runs: 15 ran" in capsys.readouterr().out
+    assert "| OmniD | **4.0 / 0.25** | **4.0 / 0.25** |" in report  # open-loop error: lowest in bold
+    assert "| DP | 8.0 / 0.25 |" in report
+    assert calls.count("omnid-offline-eval") == 12
+    assert "33 runs: 33 ran" in capsys.readouterr().out
 
     # Resume: nothing finished is redone; an eval whose result is gone, an incomplete training run (its folder
     # without a checkpoint) and a dataset with too few episodes are.
@@ -254,9 +286,9 @@ def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
     calls: list[str] = []
     monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {}, fail=("lerobot-train",)))
     assert bench.main(["--out", str(tmp_path), "--settings", "id,ood1"]) == 1
-    assert calls == ["omnid-record", "lerobot-train", "lerobot-train"]
+    assert calls == ["omnid-record"] * 3 + ["lerobot-train", "lerobot-train"]
     out = capsys.readouterr().out
-    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 4 blocked" in out
+    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 8 blocked" in out
     assert (tmp_path / "report.md").is_file()
 
 
@@ -322,6 +354,17 @@ def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_offline_table_lowest_error_in_bold(tmp_path):
+    paths = {}
+    for method, error in (("omnid", 2.5), ("diffusion", 7.25)):
+        paths[(method, TASK0, "id")] = tmp_path / f"{method}.json"
+        paths[(method, TASK0, "id")].write_text(json.dumps({"position_cm": error, "gripper": 0.125}))
+    paths[("omnid", TASK0, "ood1")] = tmp_path / "not_run.json"
+    table = offline_table(paths, ("omnid", "diffusion"), TASK0, ("id", "ood1"), LABELS)
+    assert table[0] == "| Method | id | ood1 |"
+    assert table[2:] == ["| OmniD | **2.5 / 0.12** | — |", "| DP | 7.2 / 0.12 | — |"]
+
+
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
@@ -348,8 +391,14 @@ def test_bad_arguments_are_named(argv, expected, tmp_path, capsys):
 
 def test_resumability_checks(tmp_path):
     runs = build_plan(PROFILES["mini"], tmp_path, (TASK0,))
-    record, train, first_eval = runs[0], runs[1], runs[2]
+    named = by_name(runs)
+    record, train = named[f"record/{TASK0}_bcde"], named[f"train/omnid/{TASK0}"]
+    first_eval, offline = named[f"eval/omnid/{TASK0}/id/seed1"], named[f"offline/omnid/{TASK0}/id"]
     assert not any(is_done(r) for r in runs)
+    offline.output.mkdir(parents=True)
+    assert not is_done(offline)
+    (offline.output / "offline_eval.json").write_text("{}")
+    assert is_done(offline)
     _write_eval(first_eval.output / "eval_info.json", 0.0, 5)
     (train.output / "checkpoints" / "last" / "pretrained_model").mkdir(parents=True)
     assert is_done(first_eval) and not is_done(train)  # a checkpoint folder without weights is unfinished
@@ -383,6 +432,8 @@ def test_real_tools_end_to_end_tiny(tmp_path):
         "1",
         "--episode-length",
         "10",
+        "--heldout-episodes",
+        "1",
     ]
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=900, env=env)
@@ -390,7 +441,12 @@ def test_real_tools_end_to_end_tiny(tmp_path):
     cells = {(c["model"], c["setting"]): c for c in json.loads((out / "results.json").read_text())["cells"]}
     assert set(cells) == {("omnid", "id"), ("diffusion", "id")}
     assert all(c["episodes"] == 1 for c in cells.values())
-    assert "| Method | Select Apple | Average |" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "| Method | Select Apple | Average |" in report
+    for method in ("omnid", "diffusion"):  # the open-loop diagnostic ran with the real checkpoints
+        result = json.loads((out / "offline" / method / TASK0 / "id" / "offline_eval.json").read_text())
+        assert result["episodes"] == 1 and result["frames"] > 10 and result["position_cm"] >= 0.0
+    assert "open-loop action error" in report
 
 
 def test_checkpoint_copy_with_other_cameras(tmp_path, capsys):
