@@ -16,7 +16,14 @@ SETTLE_STEPS = 25  # physics steps run at reset so that objects come to rest on 
 MAX_EPISODE_STEPS = 200  # env steps (20 s at 10 Hz); the experts finish in about 70-90
 
 # --- variants ----------------------------------------------------------------------------------------
-TASKS = ("select_apple", "select_chemistry_tube")
+TASKS = (  # the paper's tasks 0 and 1 first (few-shot and OOD settings use them)
+    "select_apple",
+    "select_chemistry_tube",
+    "add_condiment",
+    "get_coffee",
+    "set_study_table",
+    "texas_holdem",
+)
 CAMERAS = ("cam_a", "cam_b", "cam_c", "cam_d", "cam_e")
 TRAIN_CAMERAS = ("cam_b", "cam_c", "cam_d", "cam_e")  # cam_a is the unseen view for few-shot
 LAYOUTS = ("id", "position_ood")

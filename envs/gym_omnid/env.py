@@ -202,6 +202,7 @@ class OmniDEnv(gym.Env):
         self.data.ctrl[self._arm_ctrl] = self._q_target
         self.data.ctrl[self._finger_ctrl] = (1.0 - action[9]) * FINGER_TRAVEL
         mujoco.mj_step(self.model, self.data, nstep=N_SUBSTEPS)
+        self._task.after_step(self.data)
         success = self._task.is_success(self.data)
         return self._observation(), float(success), success, False, {"is_success": success}
 

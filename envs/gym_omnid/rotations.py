@@ -45,6 +45,17 @@ def topdown_rotation(yaw: float) -> np.ndarray:
     return np.array([[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]])
 
 
+def tilted_rotation(yaw: float, tilt: float) -> np.ndarray:
+    """``world_R_tcp`` (3, 3) of the top-down frame of ``yaw`` rotated by ``tilt`` rad about world x.
+
+    A positive ``tilt`` tips the tool's upper end (the top of an object held upright) toward world -y:
+    the pouring motion of the condiment expert; the arm reaches it up to past 120 deg.
+    """
+    c, s = math.cos(tilt), math.sin(tilt)
+    world_R_tilt = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    return world_R_tilt @ topdown_rotation(yaw)
+
+
 def rotation_error(world_R_target: np.ndarray, world_R_current: np.ndarray) -> np.ndarray:
     """(3,) axis-angle vector (world frame, rad) of the rotation taking current to target."""
     world_R_err = world_R_target @ world_R_current.T

@@ -149,6 +149,21 @@ def test_projection_matches_rendered_pixels(make_env, size) -> None:
     assert np.mean(errors) < 0.3
 
 
+@pytest.mark.parametrize("task", gym_omnid.TASKS)
+def test_task_objects_project_into_every_camera(make_env, task: str) -> None:
+    """Every key object, in ID and position-OOD layouts, lies in front of and inside every camera's image."""
+    envs = [make_env(task, cameras=["cam_a"], image_size=64, layout=layout) for layout in gym_omnid.LAYOUTS]
+    for env in envs:
+        for seed in range(5):
+            env.reset(seed=seed)
+            xyz_world = np.array(list(env.object_positions().values()))
+            for cam in gym_omnid.CAMERAS:
+                calib = env.camera_calibration(cam)
+                uv_pix, depth = project(calib["K"], calib["T_cam_world"], xyz_world)
+                assert (depth > 0).all(), (env.layout, seed, cam)
+                assert ((uv_pix >= 0) & (uv_pix <= 63)).all(), (env.layout, seed, cam, uv_pix)
+
+
 def test_calibration_helper_matches_env(make_env) -> None:
     env = make_env("select_chemistry_tube", image_size=(96, 160))
     cam_id = env.model.camera("cam_c").id

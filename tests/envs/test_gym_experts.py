@@ -51,11 +51,14 @@ def test_expert_plan_names(make_env) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("layout", gym_omnid.LAYOUTS)
 @pytest.mark.parametrize("task", gym_omnid.TASKS)
-def test_expert_success_rate(task: str, layout: str) -> None:
-    """>= 95 % over 100 seeded episodes (seeds 1000..1099, disjoint from the fast test's)."""
-    env = gym.make(f"gym_omnid/{task}", layout=layout, cameras=["cam_a"], image_size=32)
+def test_expert_success_rate(task: str) -> None:
+    """>= 95 % over 100 seeded ID episodes (seeds 1000..1099, disjoint from the fast test's).
+
+    ID only, to keep the whole suite within its time budget; the position-OOD rates over the same
+    number of episodes come from ``benchmarks/bench_env.py`` (envs/README.md), and every layout keeps
+    the fast test above."""
+    env = gym.make(f"gym_omnid/{task}", layout="id", cameras=["cam_a"], image_size=32)
     try:
         successes = sum(run_expert_episode(env, 1000 + i)[0] for i in range(SLOW_EPISODES))
     finally:

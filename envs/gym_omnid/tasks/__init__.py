@@ -2,11 +2,22 @@
 
 from __future__ import annotations
 
+from gym_omnid.tasks.add_condiment import AddCondiment
 from gym_omnid.tasks.base import Task
+from gym_omnid.tasks.get_coffee import GetCoffee
 from gym_omnid.tasks.select_apple import SelectApple
 from gym_omnid.tasks.select_chemistry_tube import SelectChemistryTube
+from gym_omnid.tasks.set_study_table import SetStudyTable
+from gym_omnid.tasks.texas_holdem import TexasHoldem
 
-TASK_CLASSES: tuple[type[Task], ...] = (SelectApple, SelectChemistryTube)
+TASK_CLASSES: tuple[type[Task], ...] = (
+    SelectApple,
+    SelectChemistryTube,
+    AddCondiment,
+    GetCoffee,
+    SetStudyTable,
+    TexasHoldem,
+)
 
 
 def make_task(name: str) -> Task:

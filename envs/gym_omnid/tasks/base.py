@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -66,6 +67,34 @@ def yaw_quat(yaw: float) -> np.ndarray:
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
+def ring_wall_geoms(
+    inner_radius: float, thickness: float, z_range: tuple[float, float], segments: int, material: str
+) -> str:
+    """MJCF geoms: a ring of ``segments`` fixture boxes approximating a cylindrical wall (bowls, pots).
+
+    Args:
+        inner_radius: radius of the wall's inner face, m.
+        thickness: wall thickness, m.
+        z_range: (bottom, top) of the wall in the body frame, m.
+        segments: number of boxes around the ring.
+        material: MJCF material name.
+    """
+    half_chord = (inner_radius + thickness) * math.tan(math.pi / segments)
+    ring = inner_radius + thickness / 2
+    half_height = (z_range[1] - z_range[0]) / 2
+    wall_z = z_range[0] + half_height
+    walls = []
+    for i in range(segments):
+        angle = 2 * math.pi * i / segments
+        walls.append(
+            f'<geom class="fixture" type="box" material="{material}" '
+            f'size="{thickness / 2} {half_chord:.4f} {half_height}" '
+            f'pos="{ring * math.cos(angle):.4f} {ring * math.sin(angle):.4f} {wall_z}" '
+            f'euler="0 0 {angle:.5f}"/>'
+        )
+    return "\n        ".join(walls)
+
+
 class Task(abc.ABC):
     """One benchmark task: its objects (MJCF), reset sampler, success test and instruction.
 
@@ -98,6 +127,9 @@ class Task(abc.ABC):
     def description(self) -> str:
         """Language instruction of the current episode."""
 
+    def after_step(self, data: mujoco.MjData) -> None:  # noqa: B027 (optional hook, no-op by default)
+        """Update per-episode counters once per env step, before :meth:`is_success`; none by default."""
+
     @abc.abstractmethod
     def is_success(self, data: mujoco.MjData) -> bool:
         """Whether the current state solves the task."""
@@ -105,6 +137,11 @@ class Task(abc.ABC):
     @abc.abstractmethod
     def object_positions(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
         """World xyz (3,) of the task's key objects, metres."""
+
+    def body_yaw(self, data: mujoco.MjData, body: str) -> float:
+        """Heading (rad) of the body's x axis about world z (for experts' grasps of flat objects)."""
+        world_R_body = data.xmat[self._body_id(body)].reshape(3, 3)
+        return math.atan2(float(world_R_body[1, 0]), float(world_R_body[0, 0]))
 
     # --- helpers shared by tasks ---------------------------------------------------------------
     def _body_id(self, name: str) -> int:
@@ -125,6 +162,11 @@ class Task(abc.ABC):
     def _set_mocap_xy(self, data: mujoco.MjData, body: str, xy: np.ndarray) -> None:
         mocap_id = self._model.body_mocapid[self._body_id(body)]
         data.mocap_pos[mocap_id] = (xy[0], xy[1], 0.0)
+
+    def _tilt(self, data: mujoco.MjData, body: str) -> float:
+        """Angle (rad) between the body's z axis and world +z."""
+        axis_world = data.xmat[self._body_id(body)].reshape(3, 3)[:, 2]
+        return math.acos(float(np.clip(axis_world[2], -1.0, 1.0)))
 
     def _is_resting(self, data: mujoco.MjData, body: str) -> bool:
         """Linear speed of a free body below ``REST_SPEED``."""

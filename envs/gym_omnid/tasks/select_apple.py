@@ -7,7 +7,7 @@ import math
 import mujoco
 import numpy as np
 
-from gym_omnid.tasks.base import Placement, Task, sample_layout, yaw_quat
+from gym_omnid.tasks.base import Placement, Task, ring_wall_geoms, sample_layout, yaw_quat
 
 APPLE_RADIUS = 0.035  # m
 ORANGE_RADIUS = 0.037  # m
@@ -33,24 +33,6 @@ PLACEMENTS = (
 DISTRACTORS = ("orange", "lemon", "banana")
 
 
-def _bowl_walls() -> str:
-    """Ring of boxes approximating the bowl's cylindrical wall."""
-    half_chord = (BOWL_INNER_RADIUS + BOWL_WALL_THICKNESS) * math.tan(math.pi / BOWL_WALL_SEGMENTS)
-    ring = BOWL_INNER_RADIUS + BOWL_WALL_THICKNESS / 2
-    half_height = (BOWL_RIM_HEIGHT - BOWL_BASE_THICKNESS) / 2
-    wall_z = BOWL_BASE_THICKNESS + half_height
-    walls = []
-    for i in range(BOWL_WALL_SEGMENTS):
-        angle = 2 * math.pi * i / BOWL_WALL_SEGMENTS
-        walls.append(
-            f'<geom class="fixture" type="box" material="bowl" '
-            f'size="{BOWL_WALL_THICKNESS / 2} {half_chord:.4f} {half_height}" '
-            f'pos="{ring * math.cos(angle):.4f} {ring * math.sin(angle):.4f} {wall_z}" '
-            f'euler="0 0 {angle:.5f}"/>'
-        )
-    return "\n        ".join(walls)
-
-
 class SelectApple(Task):
     """Pick the apple among an orange, a lemon and a banana and place it in the bowl.
 
@@ -71,6 +53,13 @@ class SelectApple(Task):
     def mjcf_bodies(self) -> str:
         seg_dx = BANANA_SEGMENT * math.cos(BANANA_BEND)
         seg_dy = BANANA_SEGMENT * math.sin(BANANA_BEND)
+        walls = ring_wall_geoms(
+            BOWL_INNER_RADIUS,
+            BOWL_WALL_THICKNESS,
+            (BOWL_BASE_THICKNESS, BOWL_RIM_HEIGHT),
+            BOWL_WALL_SEGMENTS,
+            "bowl",
+        )
         return f"""
     <body name="apple" pos="0.55 0.12 {APPLE_RADIUS}">
       <freejoint name="apple"/>
@@ -101,7 +90,7 @@ class SelectApple(Task):
       <geom class="fixture" type="cylinder" material="bowl"
             size="{BOWL_INNER_RADIUS + BOWL_WALL_THICKNESS} {BOWL_BASE_THICKNESS / 2}"
             pos="0 0 {BOWL_BASE_THICKNESS / 2}"/>
-        {_bowl_walls()}
+        {walls}
     </body>"""
 
     def bind(self, model: mujoco.MjModel) -> None:
