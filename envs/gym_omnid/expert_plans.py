@@ -70,7 +70,8 @@ PRESS_SPEED = 0.008  # m per env step while pressing
 # set_study_table
 PUSHER_YAW = math.pi / 2  # rad: the closed fingers push the lid with their broad side
 LID_PUSH_TIP_Z = 0.09  # m: fingertip height while pushing the open lid (below its top edge)
-LID_PUSH_START = 0.09  # m: fingertips start this far behind the hinge (beyond the open lid)
+LID_PUSH_START = 0.10  # m: fingertips start this far behind the hinge (beyond the open lid)
+LID_HOVER_CLEARANCE = 0.05  # m: fingertips this far above the open lid's top before descending
 LID_PUSH_END = 0.03  # m: and push to this far in front of it (lid past upright, it falls shut)
 BOOK_GRASP_TIP_Z = 0.004  # m: fingertip height above the table when grasping the book
 BOOK_HOVER_Z = 0.18  # m: TCP height above the book before descending
@@ -219,7 +220,7 @@ def set_study_table(env: OmniDEnv, start: Waypoint) -> list[Waypoint]:
     fx, fy, fz = positions["shelf"]
     push_z = LID_PUSH_TIP_Z + FINGER_TIP_BEYOND_TCP
     behind = hx + LID_PUSH_START
-    hover_z = hz + 2 * LAPTOP_BASE_HALF[0] + FINGER_TIP_BEYOND_TCP + 0.03  # above the open lid's top
+    hover_z = hz + 2 * LAPTOP_BASE_HALF[0] + LID_HOVER_CLEARANCE + FINGER_TIP_BEYOND_TCP
     grasp_z = kz - BOOK_HALF[2] + BOOK_GRASP_TIP_Z + FINGER_TIP_BEYOND_TCP
     release_z = fz + SHELF_TOP + BOOK_RELEASE_CLEARANCE + (grasp_z - (kz - BOOK_HALF[2]))
     book_yaw = env.task_spec.body_yaw(env.data, "book") + math.pi / 2  # close across the book's width
@@ -227,6 +228,7 @@ def set_study_table(env: OmniDEnv, start: Waypoint) -> list[Waypoint]:
         start,
         [
             ("hover_lid", (behind, hy, hover_z), CLOSED, TRAVEL_SPEED),
+            ("settle", (behind, hy, hover_z), CLOSED, None),  # the arm lags the target after travel
             ("descend_behind", (behind, hy, push_z), CLOSED, APPROACH_SPEED),
             ("push_lid", (hx - LID_PUSH_END, hy, push_z), CLOSED, APPROACH_SPEED),
         ],

@@ -29,9 +29,9 @@ LID_CLOSED = math.radians(6.0)  # rad: hinge angle below which the laptop counts
 DROP_GAP = 0.002  # m
 
 PLACEMENTS = (
-    Placement("book", (0.42, 0.16), keepout=0.09),
-    Placement("shelf", (0.65, 0.2), keepout=0.115),
-    Placement("laptop", (0.5, -0.2), keepout=0.13),
+    Placement("book", (0.4, 0.15), keepout=0.09),
+    Placement("shelf", (0.62, 0.2), keepout=0.115),
+    Placement("laptop", (0.44, -0.2), keepout=0.13),
 )
 
 
