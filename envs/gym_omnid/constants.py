@@ -13,7 +13,7 @@ CONTROL_FPS = 10  # Hz: one env step = 1 / CONTROL_FPS seconds
 PHYSICS_TIMESTEP = 0.002  # s: MuJoCo integration step
 N_SUBSTEPS = round(1.0 / (CONTROL_FPS * PHYSICS_TIMESTEP))  # physics steps per env step (50)
 SETTLE_STEPS = 25  # physics steps run at reset so that objects come to rest on their supports
-MAX_EPISODE_STEPS = 200  # env steps (20 s at 10 Hz); the experts finish in about 70-90
+MAX_EPISODE_STEPS = 200  # env steps (20 s at 10 Hz); the experts finish in about 55-105
 
 # --- variants ----------------------------------------------------------------------------------------
 TASKS = (  # the paper's tasks 0 and 1 first (few-shot and OOD settings use them)

@@ -70,8 +70,8 @@ PRESS_SPEED = 0.008  # m per env step while pressing
 # set_study_table
 PUSHER_YAW = math.pi / 2  # rad: the closed fingers push the lid with their broad side
 LID_PUSH_TIP_Z = 0.09  # m: fingertip height while pushing the open lid (below its top edge)
-LID_PUSH_START = 0.10  # m: fingertips start this far behind the hinge (beyond the open lid)
 LID_HOVER_CLEARANCE = 0.05  # m: fingertips this far above the open lid's top before descending
+LID_PUSH_START = 0.10  # m: fingertips start this far behind the hinge (beyond the open lid)
 LID_PUSH_END = 0.03  # m: and push to this far in front of it (lid past upright, it falls shut)
 BOOK_GRASP_TIP_Z = 0.004  # m: fingertip height above the table when grasping the book
 BOOK_HOVER_Z = 0.18  # m: TCP height above the book before descending
