@@ -174,13 +174,13 @@ def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
 
 
 def test_new_tasks_are_picked_up(monkeypatch, tmp_path):
-    monkeypatch.setattr(gym_omnid.constants, "TASKS", (*gym_omnid.constants.TASKS, "get_coffee"))
-    assert available_tasks()[-1] == "get_coffee"
+    monkeypatch.setattr(gym_omnid.constants, "TASKS", (*gym_omnid.constants.TASKS, "make_tea"))
+    assert available_tasks()[-1] == "make_tea"
     runs = by_name(build_plan(PROFILES["paper"], tmp_path, available_tasks()))
-    assert "record/get_coffee_bcde" in runs
-    assert {f"train/{m}/get_coffee" for m in ("omnid", "diffusion", "act", "vqbet")} <= set(runs)
-    assert [n for n in runs if n.startswith("eval/omnid/get_coffee/")] == [
-        f"eval/omnid/get_coffee/id/seed{k}" for k in (1, 2, 3, 4)
+    assert "record/make_tea_bcde" in runs
+    assert {f"train/{m}/make_tea" for m in ("omnid", "diffusion", "act", "vqbet")} <= set(runs)
+    assert [n for n in runs if n.startswith("eval/omnid/make_tea/")] == [
+        f"eval/omnid/make_tea/id/seed{k}" for k in (1, 2, 3, 4)
     ]
 
 
@@ -296,7 +296,9 @@ def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, ca
     monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
     assert bench.main(["--profile", "paper", "--dry-run", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert out.count("lerobot-train ") == 17 and out.count("checkpoint_cameras --src") == 2
+    # One training run per method and task, three ablations, six few-shot fine-tunes.
+    n_train = 4 * len(gym_omnid.constants.TASKS) + 9
+    assert out.count("lerobot-train ") == n_train and out.count("checkpoint_cameras --src") == 2
     assert "n/a" in out and "Plan: " in out
     assert not any(tmp_path.iterdir())
 
