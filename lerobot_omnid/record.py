@@ -208,12 +208,19 @@ def record_dataset(
     max_attempts = 2 * episodes + 10 if max_attempts is None else max_attempts
     if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < episodes:
         raise ValueError(f"max_attempts: expected an int >= episodes ({episodes}), got {max_attempts!r}")
-    cfg = OmniDEnvConfig(task=task, cameras=list(cameras), layout=layout, background=background,
-                         image_size=image_size, episode_length=episode_length)
+    cfg = OmniDEnvConfig(
+        task=task,
+        cameras=list(cameras),
+        layout=layout,
+        background=background,
+        image_size=image_size,
+        episode_length=episode_length,
+    )
     repo_id = repo_id or f"local/omnid_{task}"
     if push_to_hub and repo_id.startswith("local/"):
-        raise ValueError(f"repo_id: pushing to the Hub needs your namespace (e.g. <user>/omnid_{task}), "
-                         f"got {repo_id!r}")
+        raise ValueError(
+            f"repo_id: pushing to the Hub needs your namespace (e.g. <user>/omnid_{task}), got {repo_id!r}"
+        )
     root = Path(root) if root is not None else HF_LEROBOT_HOME / repo_id
     _check_root(root)
 
@@ -228,12 +235,20 @@ def record_dataset(
         # Streaming: frames go to per-camera encoder threads (no PNG round trip). Their queues hold a
         # whole episode, so a frame is never dropped however slow the encoder is.
         dataset = LeRobotDataset.create(
-            repo_id, fps=cfg.fps, root=root, features=features, robot_type=ROBOT_TYPE, use_videos=True,
-            video_backend="pyav", streaming_encoding=streaming_encoding,
+            repo_id,
+            fps=cfg.fps,
+            root=root,
+            features=features,
+            robot_type=ROBOT_TYPE,
+            use_videos=True,
+            video_backend="pyav",
+            streaming_encoding=streaming_encoding,
             encoder_queue_maxsize=cfg.episode_length + 1,
         )
-        with stop.installed(), tqdm(total=episodes, unit="ep", desc=f"Recording {task}",
-                                    disable=not show_progress) as bar:
+        with (
+            stop.installed(),
+            tqdm(total=episodes, unit="ep", desc=f"Recording {task}", disable=not show_progress) as bar,
+        ):
             while saved < episodes and attempts < max_attempts:
                 attempts += 1
                 success = _run_expert_episode(env, dataset, cfg.cameras, seed + attempts - 1, stop)
@@ -245,8 +260,9 @@ def record_dataset(
                 else:
                     dataset.clear_episode_buffer()
                 frames_per_s = dataset.meta.total_frames / (time.perf_counter() - start)
-                bar.set_postfix({"successes": f"{saved}/{attempts}", "fps": f"{frames_per_s:.1f}"},
-                                refresh=False)
+                bar.set_postfix(
+                    {"successes": f"{saved}/{attempts}", "fps": f"{frames_per_s:.1f}"}, refresh=False
+                )
                 if success:
                     bar.update(1)
                 else:
@@ -266,8 +282,16 @@ def record_dataset(
     frames = dataset.meta.total_frames if saved else 0
     if saved and push_to_hub and not interrupted:
         dataset.push_to_hub()
-    return RecordSummary(root=root, repo_id=repo_id, requested=episodes, episodes=saved, attempts=attempts,
-                         frames=frames, wall_time_s=time.perf_counter() - start, interrupted=interrupted)
+    return RecordSummary(
+        root=root,
+        repo_id=repo_id,
+        requested=episodes,
+        episodes=saved,
+        attempts=attempts,
+        frames=frames,
+        wall_time_s=time.perf_counter() - start,
+        interrupted=interrupted,
+    )
 
 
 def _positive_int(text: str) -> int:
@@ -304,29 +328,51 @@ def build_parser() -> argparse.ArgumentParser:
         description="Record scripted-expert episodes of an OmniD benchmark task as a LeRobot dataset "
         "(videos of every camera with calibration, state, action, task text).",
     )
-    parser.add_argument("--task", choices=TASKS, default="select_apple",
-                        help="benchmark task (default: %(default)s)")
-    parser.add_argument("--episodes", type=_positive_int, default=50,
-                        help="successful episodes to save (default: %(default)s)")
-    parser.add_argument("--layout", choices=LAYOUTS, default="id",
-                        help="object placement (default: %(default)s)")
-    parser.add_argument("--background", choices=BACKGROUNDS, default="id",
-                        help="table texture (default: %(default)s)")
-    parser.add_argument("--cameras", type=_camera_list, default=",".join(CAMERAS),
-                        help="comma-separated cameras to record (default: %(default)s)")
-    parser.add_argument("--image-size", type=_image_size, default=128,
-                        help="square image side, pixels (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=0,
-                        help="attempt i resets the env with seed + i (default: %(default)s)")
-    parser.add_argument("--root", type=Path, default=None,
-                        help="output directory, must not exist or be empty "
-                        "(default: $HF_LEROBOT_HOME/<repo-id>)")
+    parser.add_argument(
+        "--task", choices=TASKS, default="select_apple", help="benchmark task (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--episodes",
+        type=_positive_int,
+        default=50,
+        help="successful episodes to save (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--layout", choices=LAYOUTS, default="id", help="object placement (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--background", choices=BACKGROUNDS, default="id", help="table texture (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--cameras",
+        type=_camera_list,
+        default=",".join(CAMERAS),
+        help="comma-separated cameras to record (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--image-size", type=_image_size, default=128, help="square image side, pixels (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="attempt i resets the env with seed + i (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--root",
+        type=Path,
+        default=None,
+        help="output directory, must not exist or be empty (default: $HF_LEROBOT_HOME/<repo-id>)",
+    )
     parser.add_argument("--repo-id", default=None, help="dataset repo id (default: local/omnid_<task>)")
-    parser.add_argument("--push-to-hub", action="store_true",
-                        help="upload the dataset with LeRobot's push_to_hub when complete")
-    parser.add_argument("--max-attempts", type=_positive_int, default=None,
-                        help="bound on expert episodes run, failed ones included "
-                        "(default: 2 * episodes + 10)")
+    parser.add_argument(
+        "--push-to-hub",
+        action="store_true",
+        help="upload the dataset with LeRobot's push_to_hub when complete",
+    )
+    parser.add_argument(
+        "--max-attempts",
+        type=_positive_int,
+        default=None,
+        help="bound on expert episodes run, failed ones included (default: 2 * episodes + 10)",
+    )
     return parser
 
 
@@ -344,12 +390,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.max_attempts is not None and args.max_attempts < args.episodes:
-        parser.error(f"--max-attempts: expected at least --episodes ({args.episodes}), "
-                     f"got {args.max_attempts}")
+        parser.error(
+            f"--max-attempts: expected at least --episodes ({args.episodes}), got {args.max_attempts}"
+        )
     repo_id = args.repo_id or f"local/omnid_{args.task}"
     if args.push_to_hub and repo_id.startswith("local/"):
-        parser.error(f"--repo-id: --push-to-hub needs your Hub namespace (e.g. <user>/omnid_{args.task}), "
-                     f"got {repo_id!r}")
+        parser.error(
+            f"--repo-id: --push-to-hub needs your Hub namespace (e.g. <user>/omnid_{args.task}), "
+            f"got {repo_id!r}"
+        )
     root = args.root if args.root is not None else HF_LEROBOT_HOME / repo_id
     try:
         _check_root(root)
@@ -357,16 +406,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(e))
     quiet_third_party_logs()
     summary = record_dataset(
-        root, task=args.task, episodes=args.episodes, repo_id=repo_id, cameras=args.cameras,
-        layout=args.layout, background=args.background, image_size=args.image_size, seed=args.seed,
-        max_attempts=args.max_attempts, push_to_hub=args.push_to_hub,
+        root,
+        task=args.task,
+        episodes=args.episodes,
+        repo_id=repo_id,
+        cameras=args.cameras,
+        layout=args.layout,
+        background=args.background,
+        image_size=args.image_size,
+        seed=args.seed,
+        max_attempts=args.max_attempts,
+        push_to_hub=args.push_to_hub,
     )
     print(summary.line())
     if summary.interrupted:
         return EXIT_INTERRUPTED
     if not summary.complete:
-        print(f"error: only {summary.episodes} of {summary.requested} expert episodes succeeded within "
-              f"--max-attempts={summary.attempts}; raise it to record more.", file=sys.stderr)
+        print(
+            f"error: only {summary.episodes} of {summary.requested} expert episodes succeeded within "
+            f"--max-attempts={summary.attempts}; raise it to record more.",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
