@@ -94,7 +94,7 @@ class BenchmarkProfile:
 PROFILES = {
     "mini": BenchmarkProfile(
         name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
-        image_size=96, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, heldout_episodes=10,
+        image_size=96, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, heldout_episodes=3,
         eval_seeds=(1,),
         episode_length=200, settings=SETTINGS, fewshot=False, ablations=False, device="cpu", num_workers=2,
         small=True,
@@ -366,7 +366,8 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
             dataset = heldout_dataset(task, setting)
             output = out / "offline" / model / task / setting
             cmd = [str(BIN / "omnid-offline-eval"), "--checkpoint", str(trained.output / CHECKPOINT_SUBDIR)]
-            cmd += ["--root", str(out / "data" / dataset), "--device", p.device]
+            cmd += ["--root", str(out / "data" / dataset), "--episodes", str(p.heldout_episodes)]
+            cmd += ["--device", p.device]
             cmd += ["--out", str(output / OFFLINE_OUTPUT)]
             needs = (trained.name, f"record/{dataset}")
             runs.append(

@@ -108,6 +108,7 @@ def test_mini_plan_open_loop_diagnostic_on_held_out_episodes(tmp_path):
             assert Path(cmd[0]).name == "omnid-offline-eval" and run.result == (method, TASK0, setting)
             assert cmd[cmd.index("--checkpoint") + 1].startswith(str(tmp_path / "train" / method))
             assert cmd[cmd.index("--root") + 1] == str(tmp_path / "data" / f"{TASK0}_bcde_heldout_{setting}")
+            assert cmd[cmd.index("--episodes") + 1] == str(PROFILES["mini"].heldout_episodes)
     assert bench.FEWSHOT_SEED + PROFILES["paper"].fewshot_episodes <= HELDOUT_SEED  # never trained on
     no_heldout = dataclasses.replace(PROFILES["mini"], heldout_episodes=0)
     assert not any(r.kind == "offline" for r in build_plan(no_heldout, tmp_path, (TASK0,)))
