@@ -7,12 +7,14 @@ export MUJOCO_GL ?= egl
 .PHONY: install system-deps test test-fast demo lint
 
 # FFmpeg's shared libraries let LeRobot decode videos with torchcodec; without them LeRobot prints a
-# long traceback and falls back to PyAV. Installed with apt-get when we are root, otherwise explained.
+# long traceback and falls back to PyAV. Installed with apt-get when we are root (a failure, e.g. offline,
+# only warns), otherwise explained.
 system-deps:
 	@if ldconfig -p 2>/dev/null | grep -q libavcodec; then :; \
 	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 		echo "Installing FFmpeg libraries (apt-get install ffmpeg)"; \
-		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends ffmpeg >/dev/null; \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends ffmpeg >/dev/null) \
+			|| echo "apt-get install ffmpeg failed: LeRobot will fall back to PyAV for video decoding."; \
 	else \
 		echo "FFmpeg libraries not found and not root: run 'sudo apt-get install ffmpeg' for torchcodec (PyAV works without)."; \
 	fi

@@ -42,17 +42,22 @@ def main() -> None:
             names = list(VARIANTS) if repeat % 2 == 0 else list(reversed(VARIANTS))
             for name in names:
                 summary = record_dataset(
-                    Path(tmp) / f"{repeat}_{VARIANTS[name]}", episodes=args.episodes,
-                    cameras=args.cameras.split(","), image_size=args.image_size,
-                    streaming_encoding=VARIANTS[name], show_progress=False,
+                    Path(tmp) / f"{repeat}_{VARIANTS[name]}",
+                    episodes=args.episodes,
+                    cameras=args.cameras.split(","),
+                    image_size=args.image_size,
+                    streaming_encoding=VARIANTS[name],
+                    show_progress=False,
                 )
                 frames = summary.frames
                 fps[name].append(summary.frames_per_s)
                 print(f"  {name}: {summary.line()}")
 
     size = f"{args.image_size}x{args.image_size}"
-    print(f"\n{args.episodes} episodes ({frames} frames), {args.cameras} at {size}, "
-          f"median of {args.repeats} repeat(s):")
+    print(
+        f"\n{args.episodes} episodes ({frames} frames), {args.cameras} at {size}, "
+        f"median of {args.repeats} repeat(s):"
+    )
     medians = {name: statistics.median(values) for name, values in fps.items()}
     baseline = medians["PNG then encode (LeRobot default)"]
     for name, value in medians.items():

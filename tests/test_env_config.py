@@ -41,8 +41,14 @@ def test_registered_and_defaults():
 
 
 def test_features_for_camera_subset():
-    cfg = OmniDEnvConfig(task="select_chemistry_tube", cameras=["cam_a", "cam_c"], image_size=64,
-                         layout="position_ood", background="ood2", episode_length=30)
+    cfg = OmniDEnvConfig(
+        task="select_chemistry_tube",
+        cameras=["cam_a", "cam_c"],
+        image_size=64,
+        layout="position_ood",
+        background="ood2",
+        episode_length=30,
+    )
     assert cfg.features_map == {
         "action": "action",
         "agent_pos": "observation.state",
@@ -156,8 +162,9 @@ def test_lerobot_rollout_counts_expert_success():
     cfg = OmniDEnvConfig(cameras=["cam_c"], image_size=32)
     vec = make_env(cfg, n_envs=1)["omnid"][0]
     identity = PolicyProcessorPipeline(steps=[])
-    actions = PolicyProcessorPipeline(steps=[], to_transition=policy_action_to_transition,
-                                      to_output=transition_to_policy_action)
+    actions = PolicyProcessorPipeline(
+        steps=[], to_transition=policy_action_to_transition, to_output=transition_to_policy_action
+    )
     try:
         result = rollout(vec, _ExpertPolicy(vec), identity, identity, identity, actions, seeds=[0])
     finally:
