@@ -199,7 +199,8 @@ def write_outputs(p: BenchmarkProfile, tasks: tuple[str, ...], runs: list[Run], 
             f"(env seeds from {HELDOUT_SEED}, never trained on) replayed through each policy as "
             "`lerobot-eval` runs it (`omnid-offline-eval`); mean TCP position error (cm) / gripper error "
             "(0..1) of its action at every frame against the expert's. Lower is better; informative even "
-            "when every success rate is 0.",
+            "when every success rate is 0. The last row is the error of holding the measured pose and "
+            "gripper at every frame: a policy that does not beat it has not learned to act yet.",
             "",
         ]
         lines += report.offline_table(offline, p.methods, TASK0, p.settings, LABELS)

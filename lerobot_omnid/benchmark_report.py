@@ -17,6 +17,7 @@ Key = tuple[str, str, str]
 the cell holds; setting: "id", "position_ood", "ood1".."ood4" or "fewshot_a"."""
 
 MISSING = "—"
+HOLD_LABEL = "(holding the measured pose)"
 NOT_APPLICABLE = "n/a"
 
 
@@ -172,8 +173,14 @@ def offline_table(
     labels: Mapping[str, str],
 ) -> list[str]:
     """Task 0: mean open-loop TCP position error (cm) / gripper error on held-out expert episodes per setting,
-    from ``omnid-offline-eval``'s JSON files (``paths``, keyed by cell). The lowest position error is bold."""
+    from ``omnid-offline-eval``'s JSON files (``paths``, keyed by cell). The lowest position error is bold.
+    A last row gives, for scale, the error of holding the measured pose (the same for every method)."""
     rows = []
+    reference = [HOLD_LABEL]
+    for setting in settings:
+        found = [p for m in methods if (p := paths.get((m, task0, setting))) is not None and p.is_file()]
+        hold = json.loads(found[0].read_text()).get("hold") if found else None
+        reference.append(f"{hold['position_cm']:.1f} / {hold['gripper']:.2f}" if hold else MISSING)
     for m in methods:
         row = [labels.get(m, m)]
         for setting in settings:
@@ -190,7 +197,7 @@ def offline_table(
             for r in rows:
                 if r[c] != MISSING and float(r[c].split(" / ")[0]) == min(errors):
                     r[c] = f"**{r[c]}**"
-    return _table(["Method", *settings], rows)
+    return _table(["Method", *settings], [*rows, reference])
 
 
 def raw_table(entries: Sequence[EvalEntry], labels: Mapping[str, str]) -> list[str]:

@@ -8,7 +8,9 @@ at every frame is compared with the expert's: TCP position error (cm), rotation 
 
 Success rates of short CPU runs are often 0 % for every method, which says nothing about which one is
 closer; this error is informative at any training length and isolates the representation from compounding
-closed-loop error. It is a diagnostic next to the success rate, not a replacement.
+closed-loop error. It is a diagnostic next to the success rate, not a replacement. For scale, the same
+errors are given for holding the measured pose and gripper of each frame (``hold``): expert actions are
+small steps from the current pose, so a policy has learned something only when it beats that.
 
     omnid-offline-eval --checkpoint outputs/train/checkpoints/last/pretrained_model \\
         --root outputs/data/select_apple_heldout --out offline_eval.json
@@ -25,9 +27,13 @@ from pathlib import Path
 import numpy as np
 import torch
 from gym_omnid.rotations import matrix_from_rot6d
+from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
 
 POSITION, ROT6D, GRIPPER = slice(0, 3), slice(3, 9), 9  # layout of the gym_omnid action
+# The gym_omnid state starts with the measured pose and gripper in the action's layout: as an action it
+# means "stay where you are", the reference a policy that learned anything must beat.
+ACTION_DIM = 10
 OUTPUT_NAME = "offline_eval.json"
 
 
@@ -71,7 +77,9 @@ def evaluate_offline(
     """Mean errors over every frame of the first ``episodes`` episodes (all by default) of a dataset.
 
     Returns ``{"checkpoint", "dataset", "episodes", "frames", "position_cm", "rotation_deg", "gripper",
-    "per_episode": [{"episode", "frames", "position_cm", "rotation_deg", "gripper"}, ...]}``.
+    "hold": {"position_cm", "rotation_deg", "gripper"}, "per_episode": [{"episode", "frames",
+    "position_cm", "rotation_deg", "gripper"}, ...]}``, where ``hold`` is the error of the reference
+    policy that holds the measured pose and gripper of each frame (the expert's small step is its error).
     """
     from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 
@@ -90,6 +98,7 @@ def evaluate_offline(
         )
 
     per_frame: dict[int, list[dict[str, float]]] = {}
+    hold: list[dict[str, float]] = []
     previous_episode = None
     for index in tqdm(range(len(dataset)), desc=f"offline eval {root.name}", unit="frame"):
         item = dataset[index]
@@ -102,7 +111,9 @@ def evaluate_offline(
         with torch.inference_mode():
             action = postprocessor(policy.select_action(preprocessor(observation)))
         predicted = action.squeeze(0).cpu().numpy()
-        per_frame.setdefault(episode, []).append(action_errors(predicted, item["action"].numpy()))
+        expert = item[ACTION].numpy()
+        per_frame.setdefault(episode, []).append(action_errors(predicted, expert))
+        hold.append(action_errors(item[OBS_STATE].numpy()[:ACTION_DIM], expert))
 
     def mean(rows: Sequence[dict[str, float]], key: str) -> float:
         return float(np.mean([row[key] for row in rows]))
@@ -115,6 +126,7 @@ def evaluate_offline(
         "episodes": len(per_frame),
         "frames": len(frames),
         **{key: mean(frames, key) for key in metrics},
+        "hold": {key: mean(hold, key) for key in metrics},
         "per_episode": [
             {"episode": ep, "frames": len(rows), **{key: mean(rows, key) for key in metrics}}
             for ep, rows in per_frame.items()
@@ -157,7 +169,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(
         f"{result['episodes']} episodes, {result['frames']} frames: position {result['position_cm']:.2f} cm, "
-        f"rotation {result['rotation_deg']:.2f} deg, gripper {result['gripper']:.3f}"
+        f"rotation {result['rotation_deg']:.2f} deg, gripper {result['gripper']:.3f} "
+        f"(holding the measured pose: position {result['hold']['position_cm']:.2f} cm, "
+        f"gripper {result['hold']['gripper']:.3f})"
     )
     return 0
 

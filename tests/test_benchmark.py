@@ -361,11 +361,18 @@ def test_offline_table_lowest_error_in_bold(tmp_path):
     paths = {}
     for method, error in (("omnid", 2.5), ("diffusion", 7.25)):
         paths[(method, TASK0, "id")] = tmp_path / f"{method}.json"
-        paths[(method, TASK0, "id")].write_text(json.dumps({"position_cm": error, "gripper": 0.125}))
+        hold = {"position_cm": 3.0, "gripper": 0.05}
+        paths[(method, TASK0, "id")].write_text(
+            json.dumps({"position_cm": error, "gripper": 0.125, "hold": hold})
+        )
     paths[("omnid", TASK0, "ood1")] = tmp_path / "not_run.json"
     table = offline_table(paths, ("omnid", "diffusion"), TASK0, ("id", "ood1"), LABELS)
     assert table[0] == "| Method | id | ood1 |"
-    assert table[2:] == ["| OmniD | **2.5 / 0.12** | — |", "| DP | 7.2 / 0.12 | — |"]
+    assert table[2:] == [
+        "| OmniD | **2.5 / 0.12** | — |",
+        "| DP | 7.2 / 0.12 | — |",
+        "| (holding the measured pose) | 3.0 / 0.05 | — |",
+    ]
 
 
 @pytest.mark.parametrize(

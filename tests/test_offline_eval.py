@@ -62,6 +62,13 @@ def test_replays_every_frame_of_every_episode_through_a_saved_checkpoint(tmp_pat
     assert result["position_cm"] > 0 and result["gripper"] >= 0
     assert result["position_cm"] == pytest.approx(np.mean([e["position_cm"] for e in result["per_episode"]]))
     assert "2 episodes, 12 frames" in capsys.readouterr().out
+    # The reference: holding each frame's measured pose (the state's first 10 values) and gripper.
+    hold = [
+        action_errors(dataset[i]["observation.state"].numpy()[:10], dataset[i]["action"].numpy())
+        for i in range(len(dataset))
+    ]
+    for key in ("position_cm", "rotation_deg", "gripper"):
+        assert result["hold"][key] == pytest.approx(np.mean([h[key] for h in hold]), rel=1e-5)
 
     with pytest.raises(SystemExit):  # more episodes than the dataset has: named, nothing written
         main(
