@@ -176,11 +176,7 @@ def offline_table(
     from ``omnid-offline-eval``'s JSON files (``paths``, keyed by cell). The lowest position error is bold.
     A last row gives, for scale, the error of holding the measured pose (the same for every method)."""
     rows = []
-    reference = [HOLD_LABEL]
-    for setting in settings:
-        found = [p for m in methods if (p := paths.get((m, task0, setting))) is not None and p.is_file()]
-        hold = json.loads(found[0].read_text()).get("hold") if found else None
-        reference.append(f"{hold['position_cm']:.1f} / {hold['gripper']:.2f}" if hold else MISSING)
+    holds: dict[str, dict] = {}  # per setting, from the first method that has it
     for m in methods:
         row = [labels.get(m, m)]
         for setting in settings:
@@ -190,7 +186,12 @@ def offline_table(
                 continue
             result = json.loads(path.read_text())
             row.append(f"{result['position_cm']:.1f} / {result['gripper']:.2f}")
+            if "hold" in result:
+                holds.setdefault(setting, result["hold"])
         rows.append(row)
+    reference = [HOLD_LABEL] + [
+        f"{h['position_cm']:.1f} / {h['gripper']:.2f}" if (h := holds.get(s)) else MISSING for s in settings
+    ]
     for c in range(1, len(settings) + 1):
         errors = [float(r[c].split(" / ")[0]) for r in rows if r[c] != MISSING]
         if len(errors) >= 2 and min(errors) < max(errors):

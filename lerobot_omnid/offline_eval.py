@@ -33,7 +33,7 @@ from tqdm import tqdm
 POSITION, ROT6D, GRIPPER = slice(0, 3), slice(3, 9), 9  # layout of the gym_omnid action
 # The gym_omnid state starts with the measured pose and gripper in the action's layout: as an action it
 # means "stay where you are", the reference a policy that learned anything must beat.
-ACTION_DIM = 10
+ACTION_DIM = GRIPPER + 1
 OUTPUT_NAME = "offline_eval.json"
 
 
