@@ -83,10 +83,12 @@ def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
         "down_dims",
         "noise_scheduler_type",
         "num_inference_steps",
+        "prediction_type",
         "optimizer_lr",
         "scheduler_warmup_steps",
     )
-    assert {flag(omnid, f"policy.{h}") for h in head} == {flag(dp, f"policy.{h}") for h in head}
+    assert [flag(omnid, f"policy.{h}") for h in head] == [flag(dp, f"policy.{h}") for h in head]
+    assert flag(dp, "policy.prediction_type") == "sample"  # a short run: see diffusion_head_flags
     for r in evals:  # each eval reads the checkpoint of its own training run
         assert flag(r.cmd, "policy.path").startswith(str(tmp_path / "train" / r.result[0]))
 
