@@ -78,6 +78,10 @@ class OmniDConfig(PreTrainedConfig):
         use_self_attention: Whether each layer starts with self-attention among the plane queries.
         compressed_channels: Channels kept per query after the final 1x1 compression; the condition of
             the diffusion head has ``num_queries * compressed_channels`` entries per observation step.
+        zero_init_compression: Start the compression at zero, so that the plane enters the condition only
+            as it becomes useful. An untrained encoder's plane varies at random from image to image and
+            drowns the state for the diffusion head: in the benchmark's ``mini`` run, training loss at steps
+            50 / 75 was 0.081 / 0.038 with it and 0.187 / 0.145 without (DP: 0.068 / 0.032).
         query_chunk_size: Queries sampled at a time; bounds the memory of the sampling step.
         checkpoint_sampling: Recompute sampled features in the backward pass instead of storing them
             (much less memory at the paper's grid, about 30% more OFG compute).
@@ -130,6 +134,7 @@ class OmniDConfig(PreTrainedConfig):
     dropout: float = 0.0
     use_self_attention: bool = True
     compressed_channels: int = 1
+    zero_init_compression: bool = True
     query_chunk_size: int = 512
     checkpoint_sampling: bool = True
     spatial_softmax_num_keypoints: int = 32

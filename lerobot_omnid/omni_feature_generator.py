@@ -225,6 +225,9 @@ class OmniFeatureGenerator(nn.Module):
         self.query_pos = nn.Sequential(nn.Linear(3, d), nn.ReLU(), nn.Linear(d, d))
         self.layers = nn.ModuleList(OFGLayer(config, volume.num_anchors) for _ in range(config.num_layers))
         self.compress = nn.Linear(d, config.compressed_channels)
+        if config.zero_init_compression:  # see the config: the condition grows from zero as it trains
+            nn.init.zeros_(self.compress.weight)
+            nn.init.zeros_(self.compress.bias)
         self.out_dim = volume.num_queries * config.compressed_channels
 
     def forward(

@@ -64,9 +64,9 @@ def test_each_sample_uses_its_own_calibration():
     for s, cam in enumerate(("cam_b", "cam_c", "cam_d", "cam_e")):
         moved = synthetic_calibration(cam, SIZE, target=(0.6, 0.15, 0.05))
         cam_T_world[1, s] = torch.tensor(moved["T_cam_world"])
-    both, _ = policy.model.encode_images(images, pix_T_cam, cam_T_world)
+    both = policy.model.encode_images(images, pix_T_cam, cam_T_world)[1].plane
     alone = [
-        policy.model.encode_images(images[i : i + 1], pix_T_cam[i : i + 1], cam_T_world[i : i + 1])[0]
+        policy.model.encode_images(images[i : i + 1], pix_T_cam[i : i + 1], cam_T_world[i : i + 1])[1].plane
         for i in range(2)
     ]
     assert torch.allclose(both[0], alone[0][0], atol=1e-5)
@@ -88,9 +88,8 @@ def test_camera_that_sees_nothing_gets_no_weight():
     seen = out.geometry.anchor_visible.any(dim=(1, 3))  # B, Q
     assert torch.allclose(totals[seen], torch.ones_like(totals[seen]), atol=1e-5)
     # Dropping the blind camera changes nothing.
-    without, _ = policy.model.encode_images(images[:, :, 1:], pix_T_cam[:, 1:], away[:, 1:])
-    with_blind, _ = policy.model.encode_images(images, pix_T_cam, away)
-    assert torch.allclose(with_blind, without, atol=1e-5)
+    without = policy.model.encode_images(images[:, :, 1:], pix_T_cam[:, 1:], away[:, 1:])[1].plane
+    assert torch.allclose(out.plane, without, atol=1e-5)
 
 
 @pytest.mark.parametrize("cams", [("cam_a",), ("cam_b", "cam_c"), ("cam_a", "cam_c", "cam_e")])
@@ -106,9 +105,10 @@ def test_model_built_for_bcde_runs_on_other_cameras(cams):
 def test_gradients_reach_queries_offsets_weights_backbone():
     policy = OmniDPolicy(tiny_config()).train()
     optimizer = torch.optim.SGD(policy.parameters(), lr=1e-2)
-    # Offsets and attention logits start from zero weights (samples on the projections, uniform
-    # weights), so the camera embedding only gets gradient from the second step on.
-    for _ in range(2):
+    # The compression starts at zero (upstream gradient from the second step on), and so do offsets and
+    # attention logits (samples on the projections, uniform weights): the camera embedding, behind the
+    # logits, gets gradient from the third step on.
+    for _ in range(3):
         optimizer.zero_grad()
         loss, _ = policy.forward(random_batch(policy.config))
         loss.backward()
@@ -123,6 +123,18 @@ def test_gradients_reach_queries_offsets_weights_backbone():
         "unet": next(policy.model.unet.parameters()),
     }.items():
         assert param.grad is not None and param.grad.abs().sum() > 0, name
+
+
+def test_plane_enters_the_condition_from_zero():
+    policy = OmniDPolicy(tiny_config()).train()
+    images = torch.rand(2, 1, 4, 3, SIZE, SIZE)
+    condition, out = policy.model.encode_images(images, *ofg_inputs(policy, 2))
+    assert out.plane.abs().sum() > 0 and condition.abs().sum() == 0
+    loss, _ = policy.forward(random_batch(policy.config))
+    loss.backward()
+    assert policy.model.ofg.compress.weight.grad.abs().sum() > 0  # so the plane enters after one step
+    plain = OmniDPolicy(tiny_config(zero_init_compression=False))
+    assert plain.model.encode_images(images, *ofg_inputs(plain, 2))[0].abs().sum() > 0
 
 
 def test_training_reduces_loss_on_a_fixed_batch():
