@@ -55,8 +55,8 @@ class OmniDConfig(PreTrainedConfig):
             random initialisation. Nothing is downloaded.
         use_group_norm: Replace BatchNorm by GroupNorm (16 channels per group) in the backbone; BatchNorm
             statistics are unreliable with small batches of correlated frames.
-        backbone_layer: Last ResNet stage used: 4 gives stride-32 features (as the authors' code), 3 gives
-            stride-16 features (better for small images).
+        backbone_layer: Last ResNet stage used: 4 gives stride-32 features (as the authors' code), 3
+            stride-16 and 2 stride-8 features (finer maps for small images).
         checkpoint_backbone: Recompute backbone activations in the backward pass (stage by stage) instead
             of storing them: much less memory at 480x480, about a third more backbone compute.
         resize_shape: (height, width) images are resized to before the backbone, intrinsics rescaled
@@ -171,7 +171,7 @@ class OmniDConfig(PreTrainedConfig):
         _check_choice("noise_scheduler_type", self.noise_scheduler_type, NOISE_SCHEDULERS)
         _check_choice("prediction_type", self.prediction_type, PREDICTION_TYPES)
         _check_choice("pillar_axis", self.pillar_axis, AXES)
-        _check_choice("backbone_layer", self.backbone_layer, (3, 4))
+        _check_choice("backbone_layer", self.backbone_layer, (2, 3, 4))
         for name in (
             "d_model",
             "num_heads",
