@@ -283,6 +283,8 @@ def resolve_profile(parser: argparse.ArgumentParser, args: argparse.Namespace) -
     for name in ("device", "methods", "tasks", "settings", "eval_seeds"):
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
+    if "omnid" not in changes.get("methods", p.methods):
+        changes["ablations"] = False  # OmniD's ablations are compared with OmniD itself
     return dataclasses.replace(p, **changes)
 
 

@@ -18,6 +18,7 @@ import pytest
 import lerobot_omnid.benchmark as bench
 from lerobot_omnid import checkpoint_cameras
 from lerobot_omnid.benchmark_plan import (
+    ABLATIONS,
     HELDOUT_SEED,
     PROFILES,
     SETTINGS,
@@ -304,6 +305,18 @@ def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, ca
     assert out.count("lerobot-train ") == n_train and out.count("checkpoint_cameras --src") == 2
     assert "n/a" in out and "Plan: " in out
     assert not any(tmp_path.iterdir())
+
+
+def test_ablations_only_with_omnid(monkeypatch, tmp_path, capsys):
+    """OmniD's ablations are compared with OmniD: `--methods` without it plans none."""
+    monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
+    argv = ["--profile", "paper", "--dry-run", "--out", str(tmp_path), "--tasks", TASK0]
+    assert bench.main([*argv, "--methods", "act,vqbet"]) == 0
+    out = capsys.readouterr().out
+    assert "train/omnid_" not in out and "camera A, ablations" not in out and "--policy.type=act" in out
+    assert bench.main([*argv, "--methods", "omnid"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"train/{name}/{TASK0}" in out for name in ABLATIONS)
 
 
 def _write_eval(path: Path, rate: float, n: int) -> Path:
