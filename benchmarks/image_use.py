@@ -24,7 +24,7 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 from lerobot.utils.constants import ACTION, OBS_STATE
 
-from lerobot_omnid.offline_eval import load_policy
+from lerobot_omnid.offline_eval import POSITION, load_policy
 
 
 def chunk_action(
@@ -88,7 +88,7 @@ def main() -> None:
     own, swapped = np.array(own), np.array(swapped)
 
     def cm(a: np.ndarray, b: np.ndarray) -> float:
-        return float(100 * np.linalg.norm(a[:, :3] - b[:, :3], axis=1).mean())
+        return float(100 * np.linalg.norm(a[:, POSITION] - b[:, POSITION], axis=1).mean())
 
     print(
         f"{args.checkpoint}: frame {args.frame}, action {args.ahead} of the first chunk, {args.episodes} eps"
