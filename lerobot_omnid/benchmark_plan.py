@@ -186,6 +186,15 @@ def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
                 ("--policy.d_model=64", "CPU size: OFG width 64 (paper 128)"),
                 ("--policy.num_layers=2", "CPU size: 2 OFG layers (paper 6)"),
                 ("--policy.checkpoint_sampling=false", "memory is no concern at this size: no recomputation"),
+                (
+                    "--policy.plane_readout=keypoints",
+                    "short run: the plane is read out as 16 soft-argmax keypoints in the base frame instead "
+                    "of flattened (the paper's). Measured: with the flattened plane the 1000-step OmniD "
+                    "ignored its images (benchmarks/image_use.py: 0.001 cm action change for another "
+                    "episode's images, DP 0.85 cm), and a probe regressing the apple's position from the "
+                    "images sat at chance for 120-150 steps with it, learning from step 25 with keypoints",
+                ),
+                ("--policy.compressed_channels=16", "see plane_readout: 16 keypoints"),
             ]
         return flags + diffusion_head_flags(p)
     if method == "diffusion":

@@ -67,6 +67,19 @@ def camera_geometry(
     return CameraGeometry(anchor_grid, anchor_visible, descriptor)
 
 
+def plane_keypoints(compressed: Tensor, plane_xy: Tensor) -> Tensor:
+    """Each channel's softmax over the plane, and the expected plane position under it (a spatial soft-argmax
+    on the bird's-eye plane: positions in the base frame, not in any image).
+
+    Args:
+        compressed: (B, Q, c) channel-compressed plane.
+        plane_xy: (Q, 2) each query's position on the plane, normalised to [-1, 1] within the volume.
+    Returns:
+        (B, c, 2) one keypoint per channel, in the coordinates of ``plane_xy``.
+    """
+    return torch.einsum("bqc,qk->bck", compressed.softmax(dim=1), plane_xy)
+
+
 class CameraCrossAttention(nn.Module):
     """Deformable attention from the plane queries to the feature maps of all cameras."""
 
@@ -198,13 +211,15 @@ class OFGOutput:
 
     Attributes:
         plane: (B, Q, D) features of the plane queries (row-major over ``FeatureVolume.plane_shape``).
-        condition: (B, Q * compressed_channels) channel-compressed, flattened plane.
+        compressed: (B, Q, compressed_channels) channel-compressed plane.
+        condition: (B, out_dim) the image condition read from ``compressed`` (``config.plane_readout``).
         sampling_grid: (B, S, Q, heads, A, P, 2) last layer's sampling locations (grid coordinates).
         attention_weights: (B, S, Q, heads, A, P) last layer's attention weights.
         geometry: anchor projections.
     """
 
     plane: Tensor
+    compressed: Tensor
     condition: Tensor
     sampling_grid: Tensor
     attention_weights: Tensor
@@ -219,16 +234,22 @@ class OmniFeatureGenerator(nn.Module):
         volume = config.feature_volume
         self.register_buffer("anchors_world", volume.anchors_world(), persistent=False)  # Q, A, 3
         self.register_buffer("plane_coords", volume.plane_coords_normalized(), persistent=False)  # Q, 3
+        # Q, 2: where each query lies on the plane, in [-1, 1], for the keypoint readout
+        self.register_buffer("plane_xy", self.plane_coords[:, list(volume.plane_axes)], persistent=False)
+        self.plane_readout = config.plane_readout
         d = config.d_model
         self.input_proj = nn.Sequential(nn.Conv2d(in_channels, d, kernel_size=1), nn.GroupNorm(1, d))
         self.query_embed = nn.Parameter(torch.randn(volume.num_queries, d) * 0.02)
         self.query_pos = nn.Sequential(nn.Linear(3, d), nn.ReLU(), nn.Linear(d, d))
         self.layers = nn.ModuleList(OFGLayer(config, volume.num_anchors) for _ in range(config.num_layers))
         self.compress = nn.Linear(d, config.compressed_channels)
-        if config.zero_init_compression:  # see the config: the condition grows from zero as it trains
-            nn.init.zeros_(self.compress.weight)
-            nn.init.zeros_(self.compress.bias)
-        self.out_dim = volume.num_queries * config.compressed_channels
+        if config.plane_readout == "flatten":
+            if config.zero_init_compression:  # see the config: the condition grows from zero as it trains
+                nn.init.zeros_(self.compress.weight)
+                nn.init.zeros_(self.compress.bias)
+            self.out_dim = volume.num_queries * config.compressed_channels
+        else:
+            self.out_dim = 2 * config.compressed_channels
 
     def forward(
         self, feature_maps: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor, image_hw: tuple[int, int]
@@ -248,5 +269,9 @@ class OmniFeatureGenerator(nn.Module):
         queries = self.query_embed.expand(B, -1, -1)
         for layer in self.layers:
             queries, grid, weights = layer(queries, query_pos, features, geometry)
-        condition = self.compress(queries).flatten(1)  # B, Q*c
-        return OFGOutput(queries, condition, grid, weights, geometry)
+        compressed = self.compress(queries)  # B, Q, c
+        if self.plane_readout == "flatten":
+            condition = compressed.flatten(1)  # B, Q*c
+        else:
+            condition = plane_keypoints(compressed, self.plane_xy).flatten(1)  # B, c, 2 -> B, 2c
+        return OFGOutput(queries, compressed, condition, grid, weights, geometry)

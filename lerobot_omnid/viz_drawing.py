@@ -89,15 +89,15 @@ def attention_share(weights: Tensor) -> Tensor:
     return per_camera / total if total > 0 else torch.zeros_like(per_camera)
 
 
-def bev_heatmap(condition: Tensor, plane_shape: tuple[int, int]) -> Tensor:
-    """The channel-compressed plane (the diffusion head's image condition) as a map.
+def bev_heatmap(compressed: Tensor, plane_shape: tuple[int, int]) -> Tensor:
+    """The channel-compressed plane (what the diffusion head's image condition is read from) as a map.
 
     Args:
-        condition: (Q * c,) one step's ``OFGOutput.condition``: c compressed channels per query.
+        compressed: (Q * c,) one step's ``OFGOutput.compressed``, flattened: c channels per query.
     Returns:
         (Na, Nb), rows along the first plane axis: the value itself when c = 1, else its L2 norm over c.
     """
-    per_query = condition.reshape(plane_shape[0] * plane_shape[1], -1)  # Q, c
+    per_query = compressed.reshape(plane_shape[0] * plane_shape[1], -1)  # Q, c
     pooled = per_query[:, 0] if per_query.shape[1] == 1 else per_query.norm(dim=-1)
     return pooled.reshape(plane_shape)
 
@@ -218,7 +218,7 @@ def frame_data(
         query = first or (volume.plane_shape[0] // 2, volume.plane_shape[1] // 2)
     q = query[0] * volume.plane_shape[1] + query[1]
     lattice = anchor_lattice(volume, max_anchors)  # Q, A
-    channels = out.condition.shape[-1] // volume.num_queries
+    channels = out.compressed.shape[-1]
     sample_uv, sample_weight = query_samples(grid, weights, q, image_hw)
     objects_uv, objects_visible = project_points(pix_T_cam, cam_T_world, xyz, image_hw)
     return FrameData(
@@ -232,7 +232,7 @@ def frame_data(
         query=query,
         query_uv=grid_to_pixels(anchor_grid[:, q], image_hw).numpy(),
         query_visible=anchor_visible[:, q].numpy(),
-        heat=bev_heatmap(out.condition[0].float().cpu(), volume.plane_shape).numpy(),
+        heat=bev_heatmap(out.compressed[0].flatten().float().cpu(), volume.plane_shape).numpy(),
         heat_label=f"compressed plane feature{'' if channels == 1 else f' (L2 of {channels} channels)'}",
         share_all=attention_share(weights).numpy(),
         share_query=attention_share(weights[:, q]).numpy(),

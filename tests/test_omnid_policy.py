@@ -11,6 +11,7 @@ from lerobot_omnid.calibration import CalibrationError
 from lerobot_omnid.configuration_omnid import OmniDConfig
 from lerobot_omnid.geometry import look_at
 from lerobot_omnid.modeling_omnid import OmniDPolicy
+from lerobot_omnid.omni_feature_generator import plane_keypoints
 
 SIZE = 64
 
@@ -52,6 +53,8 @@ def test_config_validation_messages():
         tiny_config(horizon=10)
     with pytest.raises(ValueError, match="`pillar_axis` must be one of"):
         tiny_config(pillar_axis="w")
+    with pytest.raises(ValueError, match="`plane_readout` must be one of"):
+        tiny_config(plane_readout="mean")
     with pytest.raises(ValueError, match="volume_bounds"):
         tiny_config(volume_bounds=((1.0, 0.0), (0.0, 1.0), (0.0, 1.0)))
 
@@ -135,6 +138,37 @@ def test_plane_enters_the_condition_from_zero():
     assert policy.model.ofg.compress.weight.grad.abs().sum() > 0  # so the plane enters after one step
     plain = OmniDPolicy(tiny_config(zero_init_compression=False))
     assert plain.model.encode_images(images, *ofg_inputs(plain, 2))[0].abs().sum() > 0
+
+
+def test_plane_keypoints_are_expected_plane_positions():
+    plane_xy = torch.tensor([[-1.0, -1.0], [-1.0, 1.0], [1.0, -1.0], [1.0, 1.0]])
+    compressed = torch.zeros(1, 4, 2)
+    compressed[0, 2, 0] = 50.0  # channel 0 peaks at the third query, channel 1 is flat
+    keypoints = plane_keypoints(compressed, plane_xy)
+    assert keypoints.shape == (1, 2, 2)
+    torch.testing.assert_close(keypoints[0, 0], plane_xy[2])
+    torch.testing.assert_close(keypoints[0, 1], torch.zeros(2))
+
+
+def test_keypoint_readout_trains_and_acts(tmp_path):
+    policy = OmniDPolicy(tiny_config(plane_readout="keypoints", compressed_channels=3)).train()
+    volume = policy.config.feature_volume
+    images = torch.rand(2, 1, 4, 3, SIZE, SIZE)
+    condition, out = policy.model.encode_images(images, *ofg_inputs(policy, 2))
+    assert condition.shape == (2, 1, 6) and policy.model.ofg.out_dim == 6
+    assert out.compressed.shape == (2, volume.num_queries, 3)
+    assert condition.abs().max() <= 1.0 and condition.std(dim=0).sum() > 0  # depends on the images
+    loss, _ = policy.forward(random_batch(policy.config))
+    loss.backward()
+    assert policy.model.ofg.compress.weight.grad.abs().sum() > 0
+    assert policy.model.backbone.stem[0].weight.grad.abs().sum() > 0
+    policy.eval()
+    obs = observation(policy.config)
+    expected = policy.select_action(obs, noise=fixed_noise(policy.config))
+    policy.save_pretrained(tmp_path)
+    loaded = OmniDPolicy.from_pretrained(tmp_path).eval()
+    assert loaded.config.plane_readout == "keypoints"
+    assert torch.equal(loaded.select_action(obs, noise=fixed_noise(policy.config)), expected)
 
 
 def test_training_reduces_loss_on_a_fixed_batch():
