@@ -93,12 +93,11 @@ def bev_heatmap(compressed: Tensor, plane_shape: tuple[int, int]) -> Tensor:
     """The channel-compressed plane (what the diffusion head's image condition is read from) as a map.
 
     Args:
-        compressed: (Q * c,) one step's ``OFGOutput.compressed``, flattened: c channels per query.
+        compressed: (Q, c) one step's ``OFGOutput.compressed``: c channels per query.
     Returns:
         (Na, Nb), rows along the first plane axis: the value itself when c = 1, else its L2 norm over c.
     """
-    per_query = compressed.reshape(plane_shape[0] * plane_shape[1], -1)  # Q, c
-    pooled = per_query[:, 0] if per_query.shape[1] == 1 else per_query.norm(dim=-1)
+    pooled = compressed[:, 0] if compressed.shape[1] == 1 else compressed.norm(dim=-1)
     return pooled.reshape(plane_shape)
 
 
@@ -232,7 +231,7 @@ def frame_data(
         query=query,
         query_uv=grid_to_pixels(anchor_grid[:, q], image_hw).numpy(),
         query_visible=anchor_visible[:, q].numpy(),
-        heat=bev_heatmap(out.compressed[0].flatten().float().cpu(), volume.plane_shape).numpy(),
+        heat=bev_heatmap(out.compressed[0].float().cpu(), volume.plane_shape).numpy(),
         heat_label=f"compressed plane feature{'' if channels == 1 else f' (L2 of {channels} channels)'}",
         share_all=attention_share(weights).numpy(),
         share_query=attention_share(weights[:, q]).numpy(),

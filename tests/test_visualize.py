@@ -88,11 +88,11 @@ def test_attention_share_sums_to_one_and_handles_nothing_visible() -> None:
 
 def test_bev_heatmap_and_orientation() -> None:
     volume = FeatureVolume(bounds=((0.2, 0.8), (-0.3, 0.3), (0.0, 0.3)), shape=(6, 4, 2))
-    condition = torch.zeros(6 * 4)
+    condition = torch.zeros(6 * 4, 1)
     condition[2 * 4 + 3] = 1.0  # plane cell (x index 2, y index 3)
     heat = bev_heatmap(condition, volume.plane_shape)
     assert heat.shape == (6, 4) and heat[2, 3] == 1.0 and heat.sum() == 1.0
-    two_channels = torch.stack([condition, 2 * condition], dim=-1).flatten()
+    two_channels = torch.cat([condition, 2 * condition], dim=-1)
     assert bev_heatmap(two_channels, volume.plane_shape)[2, 3] == pytest.approx(5**0.5)
     # Bird's-eye: x up, y across with +y (the robot's left) drawn on the left.
     view = PlaneView.of(volume)
