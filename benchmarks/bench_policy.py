@@ -88,8 +88,8 @@ def build_policy(name: str, profile: Profile, device: str):
         "push_to_hub": False,
     }
     if name == "omnid":
-        from lerobot_omnid.configuration_omnid import OmniDConfig
-        from lerobot_omnid.modeling_omnid import OmniDPolicy
+        from lerobot_omnid.policy.configuration_omnid import OmniDConfig
+        from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
         calibration = {k: synthetic_calibration(i, size) for i, k in enumerate(keys)}
         config = OmniDConfig(**common, camera_calibration=calibration, **profile.omnid)

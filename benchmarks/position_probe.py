@@ -28,8 +28,8 @@ from lerobot.utils.constants import ACTION
 from torch import Tensor, nn
 from tqdm import tqdm
 
-from lerobot_omnid.modeling_omnid import OmniDPolicy
-from lerobot_omnid.offline_eval import GRIPPER, POSITION
+from lerobot_omnid.benchmark.offline_eval import GRIPPER, POSITION
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 FRAMES = range(0, 21, 4)  # before any expert grasp (the first close is at frame 22 or later)
 SCALE_M = 0.03  # targets in units of 3 cm

@@ -33,15 +33,11 @@ from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
-from lerobot_omnid.calibration import CameraCalibration
+from lerobot_omnid.calibration.schema import CameraCalibration
+from lerobot_omnid.cli import check_choice
 
 ENV_PACKAGE = "gym_omnid"
 """Python package that registers the gym ids ``gym_omnid/<task>``."""
-
-
-def _check_choice(field_name: str, value: Any, allowed: tuple[str, ...]) -> None:
-    if value not in allowed:
-        raise ValueError(f"{field_name}: expected one of {list(allowed)}, got {value!r}")
 
 
 def validate_cameras(field_name: str, cameras: Any) -> list[str]:
@@ -110,10 +106,10 @@ class OmniDEnvConfig(EnvConfig):
     features_map: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        _check_choice("task", self.task, TASKS)
+        check_choice("task", self.task, TASKS)
         self.cameras = validate_cameras("cameras", self.cameras)
-        _check_choice("layout", self.layout, LAYOUTS)
-        _check_choice("background", self.background, BACKGROUNDS)
+        check_choice("layout", self.layout, LAYOUTS)
+        check_choice("background", self.background, BACKGROUNDS)
         validate_image_size("image_size", self.image_size)
         if (
             isinstance(self.episode_length, bool)
@@ -128,7 +124,7 @@ class OmniDEnvConfig(EnvConfig):
                 f"fps: the omnid envs step at a fixed {CONTROL_FPS} Hz; expected {CONTROL_FPS}, "
                 f"got {self.fps!r}"
             )
-        _check_choice("render_mode", self.render_mode, ("rgb_array",))
+        check_choice("render_mode", self.render_mode, ("rgb_array",))
 
         # Derived from the fields above (a config loaded from JSON carries stale copies: rebuild).
         self.features = {

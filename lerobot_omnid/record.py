@@ -1,10 +1,10 @@
 """``omnid-record``: run the scripted experts of the OmniD benchmark and write a LeRobot dataset.
 
 Each camera becomes a video feature ``observation.images.<cam>`` whose ``info["calibration"]`` holds
-its :class:`~lerobot_omnid.calibration.CameraCalibration`; ``observation.state`` and ``action`` carry the
-env's state and action names; every frame's ``task`` is the env's language instruction. Only successful
-expert episodes are kept. Attempt ``i`` (counting failed ones) resets the env with seed ``seed + i``, so
-the same arguments give the same data.
+its :class:`~lerobot_omnid.calibration.schema.CameraCalibration`; ``observation.state`` and ``action``
+carry the env's state and action names; every frame's ``task`` is the env's language instruction. Only
+successful expert episodes are kept. Attempt ``i`` (counting failed ones) resets the env with seed
+``seed + i``, so the same arguments give the same data.
 
 Example::
 
@@ -35,7 +35,8 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES, OBS_STATE
 from tqdm import tqdm
 
-from lerobot_omnid.calibration import CALIBRATION_INFO_KEY
+from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
+from lerobot_omnid.cli import positive_int
 from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras, validate_image_size
 
 ROBOT_TYPE = "omnid_sim_arm"
@@ -294,16 +295,6 @@ def record_dataset(
     )
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
-
-
 def _camera_list(text: str) -> list[str]:
     cameras = [c.strip() for c in text.split(",") if c.strip()]
     try:
@@ -333,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--episodes",
-        type=_positive_int,
+        type=positive_int,
         default=50,
         help="successful episodes to save (default: %(default)s)",
     )
@@ -369,7 +360,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--max-attempts",
-        type=_positive_int,
+        type=positive_int,
         default=None,
         help="bound on expert episodes run, failed ones included (default: 2 * episodes + 10)",
     )

@@ -9,8 +9,8 @@ from __future__ import annotations
 import torch
 from lerobot.configs.types import FeatureType, PolicyFeature
 
-from lerobot_omnid.configuration_omnid import OmniDConfig
 from lerobot_omnid.geometry import look_at
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 
 # Camera eyes around a table whose workspace is centred at (0.5, 0, 0) in the robot base frame.
 SYNTHETIC_EYES = {

@@ -20,10 +20,18 @@ from gym_omnid.constants import CAMERA_FOVY
 from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
 from omnid_testing import ACTION_DIM, STATE_DIM, tiny_config
 
-import lerobot_omnid.calibration_file as calibration_file
-from lerobot_omnid.attach_calibration import main
-from lerobot_omnid.calibration import CalibrationError, CameraCalibration, calibration_from_feature_info
-from lerobot_omnid.calibration_file import load_calibration_file, load_calibration_meta, save_calibration_file
+import lerobot_omnid.calibration.rig_file as calibration_file
+from lerobot_omnid.calibration.attach_calibration import main
+from lerobot_omnid.calibration.rig_file import (
+    load_calibration_file,
+    load_calibration_meta,
+    save_calibration_file,
+)
+from lerobot_omnid.calibration.schema import (
+    CalibrationError,
+    CameraCalibration,
+    calibration_from_feature_info,
+)
 
 REPO_ID = "local/uncalibrated"
 CAMS = ("cam_b", "cam_c")

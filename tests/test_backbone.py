@@ -6,7 +6,7 @@ import pytest
 import torch
 from omnid_testing import tiny_config
 
-from lerobot_omnid.backbone import ResNetFeatures
+from lerobot_omnid.policy.backbone import ResNetFeatures
 
 
 @pytest.mark.parametrize(("layer", "stride", "channels"), [(2, 8, 128), (3, 16, 256), (4, 32, 512)])

@@ -15,9 +15,9 @@ import draccus
 import gym_omnid.constants
 import pytest
 
-import lerobot_omnid.benchmark as bench
-from lerobot_omnid import checkpoint_cameras
-from lerobot_omnid.benchmark_plan import (
+import lerobot_omnid.benchmark.benchmark as bench
+from lerobot_omnid.benchmark import checkpoint_cameras
+from lerobot_omnid.benchmark.plan import (
     ABLATIONS,
     HELDOUT_SEED,
     PROFILES,
@@ -28,7 +28,7 @@ from lerobot_omnid.benchmark_plan import (
     build_plan,
     is_done,
 )
-from lerobot_omnid.benchmark_report import (
+from lerobot_omnid.benchmark.report import (
     EvalEntry,
     ablation_table,
     bar_chart,

@@ -26,8 +26,8 @@ from gym_omnid.env import OmniDEnv
 from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
 from test_attach_calibration import CAMS, REPO_ID, SIZE, make_uncalibrated_dataset
 
-from lerobot_omnid.attach_calibration import main as attach_main
-from lerobot_omnid.calibrate_cameras import (
+from lerobot_omnid.calibration.attach_calibration import main as attach_main
+from lerobot_omnid.calibration.calibrate import (
     BoardSpec,
     board_image,
     detect_board,
@@ -36,8 +36,8 @@ from lerobot_omnid.calibrate_cameras import (
     world_T_board_from_points,
     world_T_board_on_table,
 )
-from lerobot_omnid.calibration import CalibrationError
-from lerobot_omnid.calibration_file import load_calibration_file, load_calibration_meta
+from lerobot_omnid.calibration.rig_file import load_calibration_file, load_calibration_meta
+from lerobot_omnid.calibration.schema import CalibrationError
 
 HEIGHT, WIDTH = 480, 640
 PX_PER_SQUARE = 64  # texture pixels per board square
@@ -269,7 +269,7 @@ def test_pinhole_calibration_attached_to_a_lower_resolution_dataset(renders, env
 
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
-    from lerobot_omnid.calibration import calibration_from_feature_info
+    from lerobot_omnid.calibration.schema import calibration_from_feature_info
 
     features = LeRobotDatasetMetadata(REPO_ID, root=root).features
     env = OmniDEnv("select_apple", image_size=SIZE, render_mode=None)
@@ -398,13 +398,14 @@ def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path, caps
 
 
 def test_readme_walkthrough_commands_parse():
-    """The commands of the README's "bring your own robot" section are valid for our parsers."""
+    """The commands of the "bring your own robot" walkthrough (docs/calibration.md) are valid for our parsers."""
     import shlex
 
-    from lerobot_omnid import attach_calibration, calibrate_cameras
+    from lerobot_omnid.calibration import attach_calibration
+    from lerobot_omnid.calibration import calibrate as calibrate_cameras
 
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    section = readme.split("## Bring your own robot")[1].split("\n## ")[0]
+    doc = (Path(__file__).parents[1] / "docs" / "calibration.md").read_text()
+    section = doc.split("## Bring your own robot")[1].split("\n## ")[0]
     parsers = {
         "omnid-calibrate": calibrate_cameras.build_parser,
         "omnid-attach-calibration": attach_calibration.build_parser,
@@ -413,7 +414,7 @@ def test_readme_walkthrough_commands_parse():
     checked = 0
     for language, block in blocks:
         if language == "python":
-            compile(block, "README", "exec")
+            compile(block, "docs/calibration.md", "exec")
             continue
         for command in block.replace("\\\n", " ").splitlines():
             words = shlex.split(command)

@@ -5,7 +5,11 @@ import copy
 import pytest
 from omnid_testing import synthetic_calibration
 
-from lerobot_omnid.calibration import CalibrationError, CameraCalibration, calibration_from_feature_info
+from lerobot_omnid.calibration.schema import (
+    CalibrationError,
+    CameraCalibration,
+    calibration_from_feature_info,
+)
 
 
 def test_round_trip():

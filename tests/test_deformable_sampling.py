@@ -2,7 +2,7 @@
 
 import torch
 
-from lerobot_omnid.deformable_sampling import multi_camera_deformable_sampling
+from lerobot_omnid.policy.deformable_sampling import multi_camera_deformable_sampling
 
 
 def bilinear_reference(image: torch.Tensor, x: float, y: float) -> torch.Tensor:

@@ -21,7 +21,7 @@ from lerobot.processor import (
 )
 from lerobot.scripts.lerobot_eval import rollout
 
-from lerobot_omnid.calibration import CameraCalibration
+from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig
 
 os.environ.setdefault("MUJOCO_GL", "egl")

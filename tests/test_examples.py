@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_omnid.modeling_omnid import OmniDPolicy
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"

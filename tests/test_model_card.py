@@ -6,7 +6,7 @@ from types import SimpleNamespace
 from huggingface_hub import ModelCard
 from omnid_testing import tiny_config
 
-from lerobot_omnid.modeling_omnid import OmniDPolicy
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 
 def test_card_states_cameras_calibration_and_eval_results(tmp_path, monkeypatch):

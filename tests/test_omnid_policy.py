@@ -7,11 +7,11 @@ import torch
 from lerobot.configs.types import FeatureType, PolicyFeature
 from omnid_testing import ACTION_DIM, STATE_DIM, random_batch, synthetic_calibration, tiny_config
 
-from lerobot_omnid.calibration import CalibrationError
-from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.calibration.schema import CalibrationError
 from lerobot_omnid.geometry import look_at
-from lerobot_omnid.modeling_omnid import OmniDPolicy
-from lerobot_omnid.omni_feature_generator import plane_keypoints
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
+from lerobot_omnid.policy.omni_feature_generator import plane_keypoints
 
 SIZE = 64
 

@@ -20,7 +20,7 @@ from gym_omnid.constants import ACTION_NAMES, CAMERAS, STATE_NAMES
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from lerobot_omnid.calibration import calibration_from_feature_info
+from lerobot_omnid.calibration.schema import calibration_from_feature_info
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.record import EXIT_INTERRUPTED, main, record_dataset
 
@@ -268,7 +268,7 @@ def test_record_dataset_rejects_bad_arguments(tmp_path):
         record_dataset(tmp_path / "a", episodes=0)
     with pytest.raises(ValueError, match="cameras: unknown camera"):
         record_dataset(tmp_path / "a", episodes=1, cameras=["cam_q"])
-    with pytest.raises(ValueError, match="task: expected one of"):
+    with pytest.raises(ValueError, match="`task` must be one of"):
         record_dataset(tmp_path / "a", episodes=1, task="make_tea")
     assert not (tmp_path / "a").exists()
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import torch
 from omnid_testing import make_tiny_dataset
 
-from lerobot_omnid.modeling_omnid import OmniDPolicy
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 LEROBOT_TRAIN = Path(sys.executable).parent / "lerobot-train"
 TINY_POLICY_FLAGS = [

@@ -14,18 +14,11 @@ import torch
 from omnid_testing import make_tiny_dataset, tiny_config
 from PIL import Image
 
-from lerobot_omnid.calibration import CameraCalibration
+from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import calibration_dict
 from lerobot_omnid.geometry import FeatureVolume, pixels_to_grid
-from lerobot_omnid.modeling_omnid import OmniDPolicy
-from lerobot_omnid.visualize import (
-    VizError,
-    camera_matrices,
-    main,
-    resolve_calibrations,
-    visualize,
-)
-from lerobot_omnid.viz_drawing import (
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
+from lerobot_omnid.viz.drawing import (
     PlaneView,
     anchor_lattice,
     attention_share,
@@ -35,6 +28,13 @@ from lerobot_omnid.viz_drawing import (
     grid_to_pixels,
     project_points,
     query_index,
+)
+from lerobot_omnid.viz.viz import (
+    VizError,
+    camera_matrices,
+    main,
+    resolve_calibrations,
+    visualize,
 )
 
 ENV_CAMS = ("cam_b", "cam_c", "cam_d", "cam_e")

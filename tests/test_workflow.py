@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_omnid.workflow import main
+from lerobot_omnid.benchmark.demo import main
 
 OMNID_DEMO = Path(sys.executable).parent / "omnid-demo"
 TINY = ["--episodes", "2", "--steps", "2", "--eval-episodes", "1", "--episode-length", "10"]

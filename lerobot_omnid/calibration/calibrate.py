@@ -6,7 +6,7 @@ Two sub-commands:
 - ``omnid-calibrate camera``: intrinsics ``K`` (and distortion) from several images of the board in
   varied poses, then extrinsics ``T_cam_world`` from one image of the board lying at a known pose in
   the robot base frame. The result is added to (or replaces that camera in) a calibration file in the
-  schema of :mod:`lerobot_omnid.calibration_file`, ready for ``omnid-attach-calibration``.
+  schema of :mod:`lerobot_omnid.calibration.rig_file`, ready for ``omnid-attach-calibration``.
 
 Board frame (both kinds): the origin is the first inner corner, the x axis runs along the board's rows
 of corners, the y axis along its columns, z = x cross y points into the board (away from the printed
@@ -47,14 +47,14 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from lerobot_omnid.calibration import CalibrationError, CameraCalibration
-from lerobot_omnid.calibration_file import (
+from lerobot_omnid.calibration.rig_file import (
     image_key,
     load_calibration_file,
     load_calibration_meta,
     read_mapping_file,
     save_calibration_file,
 )
+from lerobot_omnid.calibration.schema import CalibrationError, CameraCalibration
 
 BOARD_KINDS = ("checkerboard", "charuco")
 MIN_INTRINSICS_VIEWS = 4  # images with a detected board needed to estimate K
@@ -489,7 +489,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="omnid-calibrate",
         description="Calibrate cameras (intrinsics and extrinsics in the robot base frame) for OmniD.",
-        epilog="See the module docstring of lerobot_omnid.calibrate_cameras for the board frame.",
+        epilog="See the module docstring of lerobot_omnid.calibration.calibrate for the board frame.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     board = sub.add_parser("board", help="write a printable board image")

@@ -8,7 +8,8 @@ as the old ones); weights and processors are copied unchanged. It suits policies
 on the number or identity of cameras (LeRobot's ACT, and VQ-BeT with its one image). OmniD needs none of
 this: ``--policy.cameras`` selects its cameras.
 
-    python -m lerobot_omnid.checkpoint_cameras --src <pretrained_model> --dst <folder> --cameras cam_a
+    python -m lerobot_omnid.benchmark.checkpoint_cameras \
+        --src <pretrained_model> --dst <folder> --cameras cam_a
 """
 
 from __future__ import annotations
@@ -19,8 +20,9 @@ import shutil
 import sys
 from pathlib import Path
 
+from lerobot_omnid.keys import IMAGE_KEY_PREFIX, image_key
+
 CONFIG = "config.json"
-IMAGE_PREFIX = "observation.images."
 
 
 def retarget_cameras(src: Path, dst: Path, cameras: list[str]) -> Path:
@@ -28,15 +30,15 @@ def retarget_cameras(src: Path, dst: Path, cameras: list[str]) -> Path:
     ``dst`` with a ``config.json`` is complete."""
     config = json.loads((src / CONFIG).read_text())
     features = config.get("input_features") or {}
-    images = [ft for key, ft in features.items() if key.startswith(IMAGE_PREFIX)]
+    images = [ft for key, ft in features.items() if key.startswith(IMAGE_KEY_PREFIX)]
     if not images:
         raise ValueError(
-            f"{src / CONFIG}: input_features has no {IMAGE_PREFIX}* entry to take the shape from"
+            f"{src / CONFIG}: input_features has no {IMAGE_KEY_PREFIX}* entry to take the shape from"
         )
     if not cameras or len(set(cameras)) != len(cameras):
         raise ValueError(f"cameras: expected distinct camera names, got {cameras}")
-    others = {key: ft for key, ft in features.items() if not key.startswith(IMAGE_PREFIX)}
-    config["input_features"] = {**others, **{IMAGE_PREFIX + cam: dict(images[0]) for cam in cameras}}
+    others = {key: ft for key, ft in features.items() if not key.startswith(IMAGE_KEY_PREFIX)}
+    config["input_features"] = {**others, **{image_key(cam): dict(images[0]) for cam in cameras}}
     if dst.exists():
         shutil.rmtree(dst)
     shutil.copytree(src, dst, ignore=shutil.ignore_patterns(CONFIG))

@@ -17,7 +17,7 @@ from pathlib import Path
 import gym_omnid.constants
 from gym_omnid.constants import STATE_DIM
 
-from lerobot_omnid.commands import (
+from lerobot_omnid.benchmark.commands import (
     BIN,
     SIM_VOLUME_BOUNDS,
     TRAIN_CAMERAS,
@@ -29,7 +29,7 @@ from lerobot_omnid.commands import (
     recorded_episodes,
     train_command,
 )
-from lerobot_omnid.commands import CHECKPOINT as CHECKPOINT_SUBDIR
+from lerobot_omnid.benchmark.commands import CHECKPOINT as CHECKPOINT_SUBDIR
 
 METHODS = ("omnid", "diffusion", "act", "vqbet")
 """LeRobot policy types, in the order of the paper's tables."""
@@ -257,8 +257,8 @@ def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
     if method in ("act", "vqbet"):
         why = (
             "a copy of the task-0 checkpoint whose image input is camera A instead of the training "
-            "camera(s) (lerobot_omnid.checkpoint_cameras: a --policy.input_features override is merged "
-            "with the checkpoint's, it cannot drop them); the weights do not depend on the camera"
+            "camera(s) (lerobot_omnid.benchmark.checkpoint_cameras: a --policy.input_features override "
+            "is merged with the checkpoint's, it cannot drop them); the weights do not depend on the camera"
         )
         flags = [("--policy.path=<copy with camera A>", why)]
         if method == "vqbet":
@@ -436,7 +436,7 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
         start, start_run = out / "train" / method / TASK0 / CHECKPOINT_SUBDIR, f"train/{method}/{TASK0}"
         if method != "omnid" and fewshot_tasks:  # a copy whose image input is camera A
             src, start = start, out / "finetune" / method / "start_cam_a"
-            cmd = [sys.executable, "-m", "lerobot_omnid.checkpoint_cameras", "--src", str(src)]
+            cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.checkpoint_cameras", "--src", str(src)]
             cmd += ["--dst", str(start), "--cameras", ",".join(CAMERA_A)]
             runs.append(Run(f"prepare/{method}/cam_a", "prepare", tuple(cmd), start, (start_run,)))
             start_run = runs[-1].name

@@ -1,6 +1,7 @@
 """Command lines of the real console tools (``omnid-record``, ``lerobot-train``, ``lerobot-eval``), checks of
 what a finished one leaves behind, and a logged subprocess runner. Shared by the main job (``omnid-demo``,
-:mod:`lerobot_omnid.workflow`) and the benchmark (``omnid-benchmark``, :mod:`lerobot_omnid.benchmark`).
+:mod:`lerobot_omnid.benchmark.demo`) and the benchmark (``omnid-benchmark``,
+:mod:`lerobot_omnid.benchmark.benchmark`).
 """
 
 from __future__ import annotations

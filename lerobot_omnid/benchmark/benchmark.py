@@ -28,8 +28,9 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from lerobot_omnid import benchmark_report as report
-from lerobot_omnid.benchmark_plan import (
+from lerobot_omnid.benchmark import report
+from lerobot_omnid.benchmark.commands import run_logged
+from lerobot_omnid.benchmark.plan import (
     ABLATIONS,
     BACKGROUND_OODS,
     EVAL_SEED_STRIDE,
@@ -54,7 +55,7 @@ from lerobot_omnid.benchmark_plan import (
     is_done,
     method_flags,
 )
-from lerobot_omnid.commands import run_logged
+from lerobot_omnid.cli import int_at_least
 
 OVERRIDES = {  # option: (profile field, minimum)
     "episodes": ("episodes", 1),
@@ -256,10 +257,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--settings", type=_csv(str, SETTINGS), help=f"task-0 settings, of {','.join(SETTINGS)}"
     )
     parser.add_argument("--eval-seeds", type=_csv(int, None), help="comma-separated eval seeds, e.g. 1,2,3,4")
-    for option, (name, _) in OVERRIDES.items():
+    for option, (name, minimum) in OVERRIDES.items():
         values = ", ".join(f"{k} {getattr(v, name)}" for k, v in PROFILES.items())
         parser.add_argument(
-            f"--{option.replace('_', '-')}", type=int, help=f"override the profile's ({values})"
+            f"--{option.replace('_', '-')}",
+            type=int_at_least(minimum),
+            help=f"override the profile's ({values})",
         )
     parser.add_argument(
         "--dry-run", action="store_true", help="print the plan and every command, run nothing"
@@ -272,10 +275,8 @@ def build_parser() -> argparse.ArgumentParser:
 def resolve_profile(parser: argparse.ArgumentParser, args: argparse.Namespace) -> BenchmarkProfile:
     p = PROFILES[args.profile]
     changes = {}
-    for option, (name, minimum) in OVERRIDES.items():
+    for option, (name, _) in OVERRIDES.items():
         value = getattr(args, option)
-        if value is not None and value < minimum:
-            parser.error(f"--{option.replace('_', '-')}: expected an integer >= {minimum}, got {value}")
         if value is not None:
             changes[name] = value
     if args.eval_seeds and min(args.eval_seeds) < 1:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from lerobot_omnid.commands import (
+from lerobot_omnid.benchmark.commands import (
     CHECKPOINT,
     SIM_VOLUME_BOUNDS,
     TRAIN_CAMERAS,
@@ -32,7 +32,8 @@ from lerobot_omnid.commands import (
     recorded_episodes,
     run_stage,
 )
-from lerobot_omnid.commands import train_command as train_command_base
+from lerobot_omnid.benchmark.commands import train_command as train_command_base
+from lerobot_omnid.cli import positive_int
 
 
 @dataclass(frozen=True)
@@ -160,15 +161,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--profile", choices=sorted(PROFILES), default="cpu", help="budget (default: cpu)")
     parser.add_argument("--device", default="cpu", help="torch device for training and evaluation")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="output folder")
-    parser.add_argument("--episodes", type=int, help="override the profile's number of expert episodes")
-    parser.add_argument("--steps", type=int, help="override the profile's training steps")
-    parser.add_argument("--eval-episodes", type=int, help="override the profile's evaluation episodes")
-    parser.add_argument("--episode-length", type=int, help="time limit of evaluation episodes, env steps")
+    parser.add_argument(
+        "--episodes", type=positive_int, help="override the profile's number of expert episodes"
+    )
+    parser.add_argument("--steps", type=positive_int, help="override the profile's training steps")
+    parser.add_argument(
+        "--eval-episodes", type=positive_int, help="override the profile's evaluation episodes"
+    )
+    parser.add_argument(
+        "--episode-length", type=positive_int, help="time limit of evaluation episodes, env steps"
+    )
     args = parser.parse_args(argv)
-    for option in ("episodes", "steps", "eval_episodes", "episode_length"):
-        value = getattr(args, option)
-        if value is not None and value < 1:
-            parser.error(f"--{option.replace('_', '-')}: expected a positive integer, got {value}")
     base = PROFILES[args.profile]
     profile = Profile(
         episodes=args.episodes or base.episodes,

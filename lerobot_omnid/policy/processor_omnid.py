@@ -7,7 +7,7 @@ from typing import Any
 import torch
 from lerobot.processor import PolicyAction, PolicyProcessorPipeline, make_default_pre_post_processors
 
-from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 
 
 def make_omnid_pre_post_processors(

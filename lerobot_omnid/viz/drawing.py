@@ -1,8 +1,9 @@
 """What ``omnid-viz`` draws: pure functions from the OFG output to pixels and maps; one matplotlib frame.
 
 Shape legend: S cameras, Q plane queries, A anchors per pillar, P points per anchor, D channels,
-N points drawn, H W image. The tensors come from :class:`~lerobot_omnid.omni_feature_generator.OFGOutput`
-of ONE fused observation step (its batch dimension already indexed away).
+N points drawn, H W image. The tensors come from
+:class:`~lerobot_omnid.policy.omni_feature_generator.OFGOutput` of ONE fused observation step (its batch
+dimension already indexed away).
 
 Grid coordinates are ``grid_sample``'s ([-1, 1] spans the image, ``align_corners=False``); they do not
 depend on the image size, so the OFG's anchors and samples (at the backbone's input size) land on the
@@ -27,7 +28,7 @@ from matplotlib.patheffects import withStroke
 from torch import Tensor
 
 from lerobot_omnid.geometry import AXES, FeatureVolume, project_to_grid
-from lerobot_omnid.omni_feature_generator import OFGOutput
+from lerobot_omnid.policy.omni_feature_generator import OFGOutput
 
 ANCHOR_CMAP = "viridis"  # anchors coloured by height
 WEIGHT_CMAP = "autumn"  # the chosen query's samples coloured by attention weight

@@ -16,9 +16,12 @@ In a LeRobot dataset the calibration of camera ``observation.images.<cam>`` live
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import torch
+from torch import Tensor
 
 CALIBRATION_INFO_KEY = "calibration"
 """Key of the calibration dict inside a dataset feature's ``info``."""
@@ -126,6 +129,27 @@ class CameraCalibration:
         if det < 0:
             raise CalibrationError(f"{camera}.T_cam_world: rotation part is a reflection (det = {det:.4f})")
 
+    def resized(self, image_hw: tuple[int, int]) -> CameraCalibration:
+        """The same camera after resizing its whole image to ``image_hw`` = (height, width).
+
+        Pixel centres stay at integer coordinates: ``u' = (u + 0.5) * sx - 0.5``, so the principal point
+        moves by ``0.5 * sx - 0.5`` beyond its scaling. Distortion is in normalised coordinates and does
+        not change. ``resized(image_size)`` returns ``self``.
+        """
+        height, width = (int(s) for s in image_hw)
+        if (height, width) == self.image_size:
+            return self
+        if height < 1 or width < 1:
+            raise CalibrationError(f"resized: expected a positive (height, width), got {tuple(image_hw)}")
+        sy, sx = height / self.image_size[0], width / self.image_size[1]
+        (fx, s, cx), (_, fy, cy), _ = self.K
+        K = (
+            (fx * sx, s * sx, cx * sx + 0.5 * sx - 0.5),
+            (0.0, fy * sy, cy * sy + 0.5 * sy - 0.5),
+            (0.0, 0.0, 1.0),
+        )
+        return CameraCalibration(K, self.T_cam_world, (height, width), self.distortion)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form, the one stored in dataset feature info and in config.json."""
         out: dict[str, Any] = {
@@ -148,3 +172,22 @@ def calibration_from_feature_info(feature_key: str, feature: Mapping[str, Any]) 
             f"image_size). Record with the omnid recorder or attach one to the dataset."
         )
     return CameraCalibration.from_dict(info[CALIBRATION_INFO_KEY], camera=feature_key)
+
+
+def camera_matrices(
+    calibrations: Sequence[CameraCalibration], image_hw: Sequence[tuple[int, int]]
+) -> tuple[Tensor, Tensor]:
+    """The tensors the OFG projects with, for images of the given sizes.
+
+    Args:
+        calibrations: S cameras.
+        image_hw: S (height, width) pairs, the size of the image each camera's features come from.
+    Returns:
+        pix_T_cam (S, 3, 3) intrinsics for those sizes and cam_T_world (S, 4, 4), float32 on the CPU.
+    """
+    if len(calibrations) != len(image_hw):
+        raise ValueError(f"camera_matrices: {len(calibrations)} calibrations for {len(image_hw)} image sizes")
+    resized = [c.resized(hw) for c, hw in zip(calibrations, image_hw, strict=True)]
+    pix_T_cam = torch.tensor([c.K for c in resized], dtype=torch.float32).reshape(-1, 3, 3)
+    cam_T_world = torch.tensor([c.T_cam_world for c in resized], dtype=torch.float32).reshape(-1, 4, 4)
+    return pix_T_cam, cam_T_world

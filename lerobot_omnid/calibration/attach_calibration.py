@@ -1,7 +1,7 @@
 """``omnid-attach-calibration``: attach camera calibration to an existing LeRobot dataset.
 
 LeRobot's recording tools store no camera calibration; OmniD needs ``K`` and ``T_cam_world`` for every
-camera. This command reads a calibration file (schema: :mod:`lerobot_omnid.calibration_file`, written by
+camera. This command reads a calibration file (schema: :mod:`lerobot_omnid.calibration.rig_file`, written by
 ``omnid-calibrate`` or by hand), checks it against the dataset and writes each camera's calibration into
 ``meta/info.json`` under ``features["observation.images.<cam>"]["info"]["calibration"]``, where LeRobot
 keeps it (per-feature ``info`` survives video encoding) and OmniD's ``make_policy`` finds it. Data and
@@ -51,10 +51,10 @@ import cv2
 import numpy as np
 import torch
 
-from lerobot_omnid.calibration import CALIBRATION_INFO_KEY, CalibrationError, CameraCalibration
-from lerobot_omnid.calibration_file import image_key, load_calibration_file
-from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.calibration.rig_file import image_key, load_calibration_file
+from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, CalibrationError, CameraCalibration
 from lerobot_omnid.geometry import scale_intrinsics
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 
 INFO_PATH = Path("meta") / "info.json"
 BACKUP_SUFFIX = ".bak"
@@ -373,7 +373,7 @@ def _check_readable(new_info: Mapping[str, Any], reports: Sequence[CameraReport]
     """The new info must parse with LeRobot's own metadata class and give back every calibration."""
     from lerobot.datasets.utils import DatasetInfo
 
-    from lerobot_omnid.calibration import calibration_from_feature_info
+    from lerobot_omnid.calibration.schema import calibration_from_feature_info
 
     DatasetInfo.from_dict(copy.deepcopy(dict(new_info)))
     for report in reports:

@@ -9,14 +9,16 @@ from lerobot.configs import FeatureType, NormalizationMode, PreTrainedConfig
 from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
 from lerobot.utils.feature_utils import dataset_to_policy_features
 
-from lerobot_omnid.calibration import (
+from lerobot_omnid.calibration.rig_file import load_calibration_file
+from lerobot_omnid.calibration.schema import (
     CALIBRATION_INFO_KEY,
     CalibrationError,
     CameraCalibration,
     calibration_from_feature_info,
 )
-from lerobot_omnid.calibration_file import image_key, load_calibration_file
+from lerobot_omnid.cli import check_choice
 from lerobot_omnid.geometry import AXES, FeatureVolume
+from lerobot_omnid.keys import image_key
 
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
 NOISE_SCHEDULERS = ("DDPM", "DDIM")
@@ -44,16 +46,20 @@ class OmniDConfig(PreTrainedConfig):
             statistics (IDENTITY): the backbone normalises with fixed ImageNet statistics, so a camera that
             was not in the training set (fine-tuning, evaluation on a new view) is handled like the others.
         camera_calibration: Per image feature key, the calibration dict of
-            :class:`lerobot_omnid.calibration.CameraCalibration` (K, T_cam_world, image_size). Copied from
-            the dataset's feature info by ``set_dataset_feature_metadata``; saved in ``config.json``.
+            :class:`lerobot_omnid.calibration.schema.CameraCalibration` (K, T_cam_world, image_size).
+            Copied from the dataset's feature info by ``set_dataset_feature_metadata``; saved in
+            ``config.json``.
         cameras: Which of the dataset's cameras the policy uses, by name ("cam_b") or feature key
             ("observation.images.cam_b"); None uses every image feature of the dataset.
-        calibration_path: A calibration file (``lerobot_omnid.calibration_file``) whose cameras override
+        calibration_path: A calibration file (``lerobot_omnid.calibration.rig_file``) whose cameras override
             ``camera_calibration`` and the dataset's, e.g. to evaluate on a rig whose cameras moved.
         vision_backbone: torchvision ResNet shared by all cameras ("resnet18"; "resnet101" for the
             paper's ablation).
-        pretrained_backbone_weights: Path to a local torchvision state dict for the backbone, or None for
-            random initialisation. Nothing is downloaded.
+        pretrained_backbone_weights: Pretrained backbone weights, as LeRobot's diffusion policy takes them:
+            a torchvision weights name of ``vision_backbone`` ("ResNet18_Weights.IMAGENET1K_V1"; torchvision
+            downloads it, so only where the machine is online), or a local state-dict file (for offline
+            machines: ``torch.save(torchvision.models.resnet18(weights=...).state_dict(), path)`` where
+            online). None (the default) initialises randomly. Needs ``use_group_norm=False``.
         use_group_norm: Replace BatchNorm by GroupNorm (16 channels per group) in the backbone; BatchNorm
             statistics are unreliable with small batches of correlated frames.
         backbone_layer: Last ResNet stage used: 4 gives stride-32 features (as the authors' code), 3
@@ -177,12 +183,12 @@ class OmniDConfig(PreTrainedConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _check_choice("vision_backbone", self.vision_backbone, BACKBONES)
-        _check_choice("noise_scheduler_type", self.noise_scheduler_type, NOISE_SCHEDULERS)
-        _check_choice("prediction_type", self.prediction_type, PREDICTION_TYPES)
-        _check_choice("pillar_axis", self.pillar_axis, AXES)
-        _check_choice("plane_readout", self.plane_readout, PLANE_READOUTS)
-        _check_choice("backbone_layer", self.backbone_layer, (2, 3, 4))
+        check_choice("vision_backbone", self.vision_backbone, BACKBONES)
+        check_choice("noise_scheduler_type", self.noise_scheduler_type, NOISE_SCHEDULERS)
+        check_choice("prediction_type", self.prediction_type, PREDICTION_TYPES)
+        check_choice("pillar_axis", self.pillar_axis, AXES)
+        check_choice("plane_readout", self.plane_readout, PLANE_READOUTS)
+        check_choice("backbone_layer", self.backbone_layer, (2, 3, 4))
         for name in (
             "d_model",
             "num_heads",
@@ -331,8 +337,3 @@ class OmniDConfig(PreTrainedConfig):
     @property
     def reward_delta_indices(self) -> None:
         return None
-
-
-def _check_choice(name: str, value: Any, allowed: tuple) -> None:
-    if value not in allowed:
-        raise ValueError(f"`{name}` must be one of {list(allowed)}, got {value!r}")

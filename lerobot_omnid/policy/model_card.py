@@ -8,8 +8,8 @@ from pathlib import Path
 
 import torch
 
-from lerobot_omnid.configuration_omnid import OmniDConfig
 from lerobot_omnid.geometry import camera_centers_world
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 
 
 def find_eval_results(output_dir: str | Path) -> dict[str, dict]:

@@ -30,6 +30,8 @@ from gym_omnid.rotations import matrix_from_rot6d
 from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
 
+from lerobot_omnid.cli import positive_int
+
 POSITION, ROT6D, GRIPPER = slice(0, 3), slice(3, 9), 9  # layout of the gym_omnid action
 # The gym_omnid state starts with the measured pose and gripper in the action's layout: as an action it
 # means "stay where you are", the reference a policy that learned anything must beat.
@@ -134,13 +136,6 @@ def evaluate_offline(
     }
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="omnid-offline-eval", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -148,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--checkpoint", type=Path, required=True, help="a pretrained_model folder")
     parser.add_argument("--root", type=Path, required=True, help="local root of a recorded dataset")
     parser.add_argument("--repo-id", help="the dataset's repo id (default: local/<root folder name>)")
-    parser.add_argument("--episodes", type=_positive_int, help="evaluate the first N episodes (default: all)")
+    parser.add_argument("--episodes", type=positive_int, help="evaluate the first N episodes (default: all)")
     parser.add_argument("--device", default="cpu", help="torch device (default: cpu)")
     parser.add_argument("--out", type=Path, help=f"write the result as JSON here (e.g. .../{OUTPUT_NAME})")
     return parser

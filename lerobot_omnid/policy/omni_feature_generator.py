@@ -18,9 +18,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from lerobot_omnid.configuration_omnid import OmniDConfig
-from lerobot_omnid.deformable_sampling import multi_camera_deformable_sampling
 from lerobot_omnid.geometry import camera_centers_world, project_to_grid
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
+from lerobot_omnid.policy.deformable_sampling import multi_camera_deformable_sampling
 
 CAMERA_GEOMETRY_DIM = 6  # unit ray camera->pillar centre (3), its grid coordinates (2), visible anchors (1)
 

@@ -1,7 +1,7 @@
 """Calibration files: the calibration of a camera rig, one entry per camera, as JSON or YAML.
 
 The file maps each camera (its image feature key ``observation.images.<cam>``, or the bare name
-``<cam>``) to one calibration. Conventions are those of :mod:`lerobot_omnid.calibration`: the world
+``<cam>``) to one calibration. Conventions are those of :mod:`lerobot_omnid.calibration.schema`: the world
 frame is the robot base frame (x forward, y left, z up, metres, z = 0 on the table top); ``K`` is the
 OpenCV pinhole matrix for images of ``image_size``, pixel centres at integer coordinates.
 
@@ -52,7 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from lerobot_omnid.calibration import CalibrationError, CameraCalibration
+from lerobot_omnid.calibration.schema import CalibrationError, CameraCalibration
+from lerobot_omnid.keys import image_key
 
 try:
     import yaml
@@ -63,11 +64,6 @@ YAML_SUFFIXES = (".yaml", ".yml")
 FILE_FIELDS = ("image_size", "K", "T_cam_world", "T_world_cam", "distortion", "meta")
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 """Numbers of OpenCV distortion coefficients accepted (0: none)."""
-
-
-def image_key(camera: str) -> str:
-    """``cam_b`` -> ``observation.images.cam_b``; full feature keys are returned unchanged."""
-    return camera if camera.startswith("observation.image") else f"observation.images.{camera}"
 
 
 def _parse_yaml(text: str, path: Path, also: str = "") -> Any:
@@ -90,7 +86,7 @@ def read_mapping_file(path: Path) -> dict[str, Any]:
     if text.lstrip().startswith("%YAML:"):
         raise CalibrationError(
             f"calibration file {path}: OpenCV FileStorage files are not supported; write the schema of "
-            f"lerobot_omnid.calibration_file (plain JSON or YAML lists of numbers)"
+            f"lerobot_omnid.calibration.rig_file (plain JSON or YAML lists of numbers)"
         )
     if path.suffix.lower() in YAML_SUFFIXES:
         data = _parse_yaml(text, path)

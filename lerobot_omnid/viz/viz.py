@@ -30,15 +30,15 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_omnid.calibration import CALIBRATION_INFO_KEY, CalibrationError, CameraCalibration
-from lerobot_omnid.calibration_file import image_key
-from lerobot_omnid.configuration_omnid import OmniDConfig
+from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, CalibrationError, CameraCalibration
+from lerobot_omnid.cli import int_at_least
 from lerobot_omnid.geometry import scale_intrinsics
-from lerobot_omnid.viz_drawing import FrameData, draw_frame, figure_rgb, frame_data, write_mp4
+from lerobot_omnid.keys import IMAGE_KEY_PREFIX, camera_name, image_key
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
+from lerobot_omnid.viz.drawing import FrameData, draw_frame, figure_rgb, frame_data, write_mp4
 
 DEFAULT_MAX_ANCHORS = 2500  # anchors drawn per camera at most (a regular sub-lattice of the volume)
 CALIBRATION_ATOL = 1e-3  # m and px: checkpoint and source calibrations closer than this agree
-IMAGES = "observation.images."
 
 
 class VizError(ValueError):
@@ -73,9 +73,9 @@ class DatasetSource:
             )
         self.episode, self.fps, self.stem = episode, self.meta.fps, f"{root.name}_ep{episode:03d}"
         self.cameras = [
-            k.removeprefix(IMAGES)
+            camera_name(k)
             for k, ft in self.meta.features.items()
-            if k.startswith(IMAGES) and ft["dtype"] in ("video", "image")
+            if k.startswith(IMAGE_KEY_PREFIX) and ft["dtype"] in ("video", "image")
         ]
         self.dataset = LeRobotDataset(self.repo_id, root=root, episodes=[episode], video_backend="pyav")
         self.num_frames = len(self.dataset)
@@ -202,7 +202,7 @@ def _select_cameras(requested, policy_cams: list[str], available: Sequence[str],
                 f"({list(available)}); name the cameras to fuse with --cameras"
             )
         return cams
-    cams = [image_key(c).removeprefix(IMAGES) for c in requested]
+    cams = [camera_name(c) for c in requested]
     if not cams or len(set(cams)) != len(cams) or not set(cams) <= set(available):
         raise VizError(
             f"--cameras: expected distinct names from {list(available)} ({where}), got {requested}"
@@ -254,7 +254,7 @@ def visualize(
     ``steps`` and gym ``env_kwargs`` such as ``layout`` and ``background``). ``steps``: expert steps
     before the PNG (default 0) or the video's length (default: until the episode ends).
     """
-    from lerobot_omnid.modeling_omnid import OmniDPolicy
+    from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
     start = time.perf_counter()
     if (dataset_root is None) == (env_task is None):
@@ -266,7 +266,7 @@ def visualize(
             f"--query: expected i,j with 0 <= i < {volume.plane_shape[0]} and 0 <= j < "
             f"{volume.plane_shape[1]} (the checkpoint's query plane), got {query}"
         )
-    policy_cams = [k.removeprefix(IMAGES) for k in config.image_features]
+    policy_cams = [camera_name(k) for k in config.image_features]
     if dataset_root is not None:
         source = DatasetSource(Path(dataset_root), repo_id, episode)
         cams = _select_cameras(cameras, policy_cams, source.cameras, f"the dataset at {dataset_root}")
@@ -345,15 +345,6 @@ def _query(text: str) -> tuple[int, int]:
     return i, j
 
 
-def _int_at_least(minimum: int):
-    def parse(text: str) -> int:
-        if not text.strip().lstrip("-").isdigit() or int(text) < minimum:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}")
-        return int(text)
-
-    return parse
-
-
 def build_parser() -> argparse.ArgumentParser:
     from gym_omnid.constants import BACKGROUNDS, LAYOUTS, TASKS
 
@@ -373,20 +364,20 @@ def build_parser() -> argparse.ArgumentParser:
     add("--out", type=Path, required=True, help="output directory (created if needed)")
     add("--dataset-root", type=Path, help="source: a LeRobot dataset directory")
     add("--repo-id", help="its repo id (default: local/<directory name>)")
-    add("--episode", type=_int_at_least(0), help="dataset episode (default: 0)")
-    add("--frame", type=_int_at_least(0), help="frame of the episode for the PNG (default: 0)")
+    add("--episode", type=int_at_least(0), help="dataset episode (default: 0)")
+    add("--frame", type=int_at_least(0), help="frame of the episode for the PNG (default: 0)")
     add("--env-task", choices=TASKS, help="source: a gym_omnid env driven by the scripted expert")
     add("--layout", choices=LAYOUTS, default="id", help="env object placement (default: %(default)s)")
     add("--background", choices=BACKGROUNDS, default="id", help="env table texture (default: %(default)s)")
     add("--seed", type=int, default=0, help="env reset seed (default: %(default)s)")
     add(
         "--steps",
-        type=_int_at_least(0),
+        type=int_at_least(0),
         help="env: expert steps before the PNG (default: 0) or video length "
         "(default: until the episode ends)",
     )
     add("--video", action="store_true", help="write an mp4 over the episode instead of a PNG")
-    add("--stride", type=_int_at_least(1), default=1, help="video: draw every k-th frame (default: 1)")
+    add("--stride", type=int_at_least(1), default=1, help="video: draw every k-th frame (default: 1)")
     add(
         "--query",
         type=_query,
@@ -400,10 +391,10 @@ def build_parser() -> argparse.ArgumentParser:
         "calibration for takes the source's",
     )
     add("--device", default="cpu", help="torch device (default: %(default)s)")
-    add("--dpi", type=_int_at_least(30), default=100, help="figure resolution (default: %(default)s)")
+    add("--dpi", type=int_at_least(30), default=100, help="figure resolution (default: %(default)s)")
     add(
         "--max-anchors",
-        type=_int_at_least(1),
+        type=int_at_least(1),
         default=DEFAULT_MAX_ANCHORS,
         help="anchors drawn per camera at most (default: %(default)s)",
     )

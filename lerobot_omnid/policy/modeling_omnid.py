@@ -18,11 +18,11 @@ from lerobot.policies.utils import get_output_shape, populate_queues
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_omnid.backbone import ResNetFeatures
-from lerobot_omnid.configuration_omnid import OmniDConfig
 from lerobot_omnid.geometry import scale_intrinsics
-from lerobot_omnid.model_card import find_eval_results, omnid_card_section
-from lerobot_omnid.omni_feature_generator import OFGOutput, OmniFeatureGenerator
+from lerobot_omnid.policy.backbone import ResNetFeatures
+from lerobot_omnid.policy.configuration_omnid import OmniDConfig
+from lerobot_omnid.policy.model_card import find_eval_results, omnid_card_section
+from lerobot_omnid.policy.omni_feature_generator import OFGOutput, OmniFeatureGenerator
 
 
 class OmniDPolicy(PreTrainedPolicy):
