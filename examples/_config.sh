@@ -14,15 +14,28 @@
 : "${EPISODE_LENGTH:=200}"            # time limit of an evaluation episode, env steps (10 per second)
 : "${NUM_WORKERS:=2}"                 # dataloader workers
 
-TRAIN_CAMERAS="[cam_b,cam_c,cam_d,cam_e]"            # for --env.cameras
-POLICY_TRAIN_CAMERAS='["cam_b","cam_c","cam_d","cam_e"]'  # for --policy.cameras: JSON strings, which
-                                                        # also parse when --policy.path loads a checkpoint
+# The python of the environment the lerobot commands come from (the activated .venv; else the repo's
+# .venv), to read the benchmark's shared names from gym_omnid; override with PYTHON=...
+if [ -z "${PYTHON:-}" ]; then
+  if command -v lerobot-train > /dev/null; then PYTHON="$(dirname "$(command -v lerobot-train)")/python"
+  else PYTHON="$(dirname "${BASH_SOURCE[0]}")/../.venv/bin/python"; fi
+  [ -x "$PYTHON" ] || PYTHON=python
+fi
+gym_omnid_json() {  # a name of gym_omnid as compact JSON
+  "$PYTHON" -c "import json, gym_omnid; print(json.dumps(gym_omnid.$1, separators=(',', ':')))"
+}
+# Cameras B-E, for --env.cameras ([cam_b,...]) and --policy.cameras (JSON strings, which also parse when
+# --policy.path loads a checkpoint); the workspace box (metres, robot base frame) for --policy.volume_bounds.
+TRAIN_CAMERAS=$("$PYTHON" -c 'import gym_omnid; print("[" + ",".join(gym_omnid.TRAIN_CAMERAS) + "]")')
+POLICY_TRAIN_CAMERAS=$(gym_omnid_json TRAIN_CAMERAS)
+WORKSPACE_BOUNDS=$(gym_omnid_json WORKSPACE_BOUNDS)
 CHECKPOINT="$OUT/train_bcde/checkpoints/last/pretrained_model"
-# OmniD settings for the benchmark's workspace (objects lie in x 0.3..0.8 m, y -0.3..0.35 m) and sampling
-# with DDIM in 10 steps; see lerobot_omnid/configuration_omnid.py for every option.
+# OmniD settings: its volume is the benchmark's workspace (gym_omnid.WORKSPACE_BOUNDS, which holds every
+# object position), sampling with DDIM in 10 steps; see lerobot_omnid/policy/configuration_omnid.py for
+# every option.
 POLICY_FLAGS=(
   --policy.type=omnid --policy.device="$DEVICE" --policy.push_to_hub=false
-  --policy.volume_bounds="[[0.2,0.84],[-0.4,0.4],[0.0,0.32]]" --policy.volume_shape="[32,40,16]"
+  --policy.volume_bounds="$WORKSPACE_BOUNDS" --policy.volume_shape="[32,40,16]"
   --policy.backbone_layer=3 --policy.noise_scheduler_type=DDIM --policy.num_inference_steps=10
 )
 COMMON_TRAIN_FLAGS=(

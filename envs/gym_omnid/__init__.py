@@ -27,6 +27,7 @@ from gym_omnid.constants import (
     STATE_NAMES,
     TASKS,
     TRAIN_CAMERAS,
+    WORKSPACE_BOUNDS,
 )
 
 for _task in TASKS:
@@ -49,4 +50,5 @@ __all__ = [
     "STATE_NAMES",
     "TASKS",
     "TRAIN_CAMERAS",
+    "WORKSPACE_BOUNDS",
 ]

@@ -33,6 +33,11 @@ MAX_IMAGE_SIDE = 2048  # px: upper bound accepted for one image side
 ID_HALF_EXTENT = 0.05  # m: ID positions are nominal +- 5 cm (a 10 cm x 10 cm square)
 OOD_HALF_EXTENT = 0.10  # m: position-OOD positions have |offset|_inf in (5 cm, 10 cm]
 LAYOUT_MAX_TRIES = 200  # rejection-sampling attempts before a layout sampler gives up
+# Workspace: the box, per world axis (x, y, z) as (min, max) in metres, that holds every object position
+# of every task in every layout (across tasks and seeds: x 0.30..0.73, y -0.29..0.39, z 0..0.28, the top
+# being the coffee machine's button), with a few cm to spare. It is the benchmark's OmniD volume
+# (``--policy.volume_bounds``), so the policy's 3D feature grid covers everything it must reach.
+WORKSPACE_BOUNDS = ((0.2, 0.84), (-0.4, 0.4), (0.0, 0.32))
 
 # --- rendering ---------------------------------------------------------------------------------------
 CAMERA_FOVY = 50.0  # deg: vertical field of view of every fixed camera

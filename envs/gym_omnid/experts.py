@@ -8,8 +8,9 @@ Usage::
         obs, reward, terminated, truncated, info = env.step(expert.act())
 
 The plan is computed once, right after ``reset``, from privileged simulator state (object poses) by the
-task's planner in :mod:`gym_omnid.expert_plans`: a list of named waypoints (:mod:`gym_omnid.waypoints`)
-replayed by one pure interpolation function.
+task's :meth:`~gym_omnid.tasks.base.Task.plan_expert` (next to the task's geometry in its module under
+:mod:`gym_omnid.tasks`): a list of named waypoints (:mod:`gym_omnid.waypoints`) replayed by one pure
+interpolation function.
 """
 
 from __future__ import annotations
@@ -21,8 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from gym_omnid.constants import MAX_EPISODE_STEPS
-from gym_omnid.expert_plans import GRASP_YAW, PLANNERS
-from gym_omnid.waypoints import OPEN, Waypoint, interpolate, plan_length, waypoint_action
+from gym_omnid.waypoints import GRASP_YAW, OPEN, Waypoint, interpolate, plan_length, waypoint_action
 
 if TYPE_CHECKING:
     from gym_omnid.env import OmniDEnv
@@ -60,7 +60,7 @@ def make_expert(env: OmniDEnv) -> ScriptedExpert:
     """Plan an expert for the episode just reset in ``env`` (the unwrapped :class:`OmniDEnv`)."""
     tcp_xyz, _ = env.tcp_pose()
     start = Waypoint("start", tuple(float(v) for v in tcp_xyz), GRASP_YAW, OPEN, 1)
-    plan = PLANNERS[env.task](env, start)
+    plan = env.task_spec.plan_expert(env.data, start)
     return ScriptedExpert(start, plan)
 
 

@@ -21,6 +21,8 @@ MIN_MOVE_STEPS = 3  # env steps: shortest move
 GRIPPER_STEPS = 4  # env steps to close or open the gripper
 HOLD_STEPS = 2  # env steps of waiting for a grasp to settle
 OPEN, CLOSED = 0.0, 1.0  # gripper commands
+GRASP_YAW = 0.0  # rad: yaw of every plan's start and of plain top-down grasps: fingers close along world x
+RETREAT_Z = 0.28  # m: TCP height after releasing
 
 # One move of a plan: (name, TCP xyz, gripper command, speed in m per env step); speed None makes a
 # gripper-only phase that stays in place (GRIPPER_STEPS when the command changes, else HOLD_STEPS).

@@ -26,6 +26,7 @@ def test_exports() -> None:
     assert gym_omnid.LAYOUTS == ("id", "position_ood")
     assert gym_omnid.BACKGROUNDS == ("id", "ood1", "ood2", "ood3", "ood4")
     assert gym_omnid.CONTROL_FPS == 10
+    assert gym_omnid.WORKSPACE_BOUNDS == ((0.2, 0.84), (-0.4, 0.4), (0.0, 0.32))
     assert [f"gym_omnid/{task}" for task in sorted(gym_omnid.TASKS)] == REGISTERED
 
 
@@ -139,6 +140,18 @@ def test_layout_sampler_exact_bands_and_keepout(task: str) -> None:
                     assert ID_HALF_EXTENT < linf <= OOD_HALF_EXTENT
                 for b in module.PLACEMENTS[i + 1 :]:
                     assert np.linalg.norm(xy[a.name] - xy[b.name]) >= a.keepout + b.keepout
+
+
+@pytest.mark.parametrize("layout", gym_omnid.LAYOUTS)
+@pytest.mark.parametrize("task", gym_omnid.TASKS)
+def test_object_positions_lie_in_the_workspace_bounds(make_env, task: str, layout: str) -> None:
+    """Every object of every task and layout lies inside ``WORKSPACE_BOUNDS`` (the policy's volume)."""
+    low, high = np.array(gym_omnid.WORKSPACE_BOUNDS).T  # 3, 2 -> (3,), (3,)
+    env = make_env(task, cameras=["cam_a"], image_size=32, layout=layout)
+    for seed in range(6):
+        env.reset(seed=seed)
+        for name, xyz in env.object_positions().items():
+            assert np.all((low <= xyz) & (xyz <= high)), (seed, name, xyz)
 
 
 @pytest.mark.parametrize("layout", gym_omnid.LAYOUTS)

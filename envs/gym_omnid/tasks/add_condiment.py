@@ -8,6 +8,16 @@ import mujoco
 import numpy as np
 
 from gym_omnid.tasks.base import Placement, Task, ring_wall_geoms, sample_layout, yaw_quat
+from gym_omnid.waypoints import (
+    APPROACH_SPEED,
+    CLOSED,
+    HOLD_STEPS,
+    OPEN,
+    TILT_SPEED,
+    TRAVEL_SPEED,
+    Waypoint,
+    chain,
+)
 
 BOTTLE_RADIUS = 0.024  # m: radius of the bottle's body
 BOTTLE_HALF_HEIGHT = 0.05  # m: half height of the body; the body frame sits at its centre
@@ -26,6 +36,13 @@ POT_HANDLE_HALF = (0.02, 0.012, 0.006)  # m: half sizes of the two side handles
 POUR_MIN_TILT = math.radians(75.0)  # rad: bottle axis from vertical that counts as pouring
 POUR_STEPS = 5  # env steps (0.5 s) of sustained pouring that solve the task
 DROP_GAP = 0.002  # m
+# scripted expert
+BOTTLE_GRASP_YAW = math.pi / 2  # rad: fingers close along world y, so the pouring tilt (about world x)
+# turns the bottle against the pads' faces rather than about them
+BOTTLE_HOVER_Z = 0.20  # m: TCP height above the bottle's centre before descending
+POUR_TCP_Z = 0.22  # m: TCP height while carrying and pouring (bottle well above the pot's rim)
+POUR_TILT = math.radians(110.0)  # rad: tilt of the gripper (and bottle) while pouring
+POUR_EXTRA_STEPS = 3  # env steps held beyond POUR_STEPS
 
 PLACEMENTS = (
     Placement("bottle", (0.45, 0.15), keepout=0.07),
@@ -130,3 +147,32 @@ class AddCondiment(Task):
 
     def object_positions(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
         return {"bottle": data.xpos[self._bottle].copy(), "pot": data.xpos[self._pot].copy()}
+
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """Grasp the bottle's body, lift, carry beside the pot's centre, tilt so the mouth comes over the
+        centre, hold the pour, tilt back."""
+        positions = self.object_positions(data)
+        bx, by, bz = positions["bottle"]
+        px, py, _ = positions["pot"]
+        # The mouth lies BOTTLE_MOUTH from the grasp point (the bottle's centre) along the bottle's axis,
+        # which the tilt turns toward world -y: hold the TCP that far on the +y side of the pot's centre.
+        pour_xyz = (px, py + BOTTLE_MOUTH * math.sin(POUR_TILT), POUR_TCP_Z)
+        plan = chain(
+            start,
+            [
+                ("hover_bottle", (bx, by, BOTTLE_HOVER_Z), OPEN, TRAVEL_SPEED),
+                ("descend", (bx, by, bz), OPEN, APPROACH_SPEED),
+                ("close", (bx, by, bz), CLOSED, None),
+                ("hold", (bx, by, bz), CLOSED, None),
+                ("lift", (bx, by, POUR_TCP_Z), CLOSED, APPROACH_SPEED),
+                ("carry", pour_xyz, CLOSED, TRAVEL_SPEED),
+            ],
+            BOTTLE_GRASP_YAW,
+        )
+        tilt_steps = math.ceil(POUR_TILT / TILT_SPEED)
+        return [
+            *plan,
+            Waypoint("tilt", pour_xyz, BOTTLE_GRASP_YAW, CLOSED, tilt_steps, POUR_TILT),
+            Waypoint("pour", pour_xyz, BOTTLE_GRASP_YAW, CLOSED, POUR_STEPS + POUR_EXTRA_STEPS, POUR_TILT),
+            Waypoint("untilt", pour_xyz, BOTTLE_GRASP_YAW, CLOSED, tilt_steps + HOLD_STEPS),
+        ]

@@ -11,6 +11,7 @@ import numpy as np
 
 from gym_omnid.constants import ID_HALF_EXTENT, LAYOUT_MAX_TRIES, OOD_HALF_EXTENT, REST_SPEED
 from gym_omnid.robot import FINGER_GEOMS, HAND_GEOM
+from gym_omnid.waypoints import Waypoint
 
 
 @dataclass(frozen=True)
@@ -137,6 +138,13 @@ class Task(abc.ABC):
     @abc.abstractmethod
     def object_positions(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
         """World xyz (3,) of the task's key objects, metres."""
+
+    @abc.abstractmethod
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """The scripted expert's whole plan for the episode just reset into ``data``, after ``start``.
+
+        Reads privileged state (object poses) once; :func:`gym_omnid.experts.make_expert` replays it.
+        """
 
     def body_yaw(self, data: mujoco.MjData, body: str) -> float:
         """Heading (rad) of the body's x axis about world z (for experts' grasps of flat objects)."""

@@ -7,7 +7,9 @@ import math
 import mujoco
 import numpy as np
 
+from gym_omnid.robot import FINGER_TIP_BEYOND_TCP
 from gym_omnid.tasks.base import Placement, Task, sample_layout, yaw_quat
+from gym_omnid.waypoints import APPROACH_SPEED, CLOSED, OPEN, TRAVEL_SPEED, Waypoint, chain
 
 MUG_RADIUS = 0.035  # m
 MUG_HALF_HEIGHT = 0.045  # m: the mug's body frame sits at its centre
@@ -33,6 +35,15 @@ UNDER_SPOUT_TOL = 0.02  # m: mug axis within this distance of the spout's axis
 MUG_MAX_TILT = math.radians(15.0)  # rad: the mug stands upright
 MUG_MAX_LIFT = 0.01  # m: mug bottom at most this far above the tray (it stands on it)
 DROP_GAP = 0.002  # m
+# scripted expert
+MUG_GRASP_YAW = math.pi / 2  # rad: fingers close along world y, beside the machine's column
+MUG_HOVER_Z = 0.20  # m: TCP height above the mug before descending
+MUG_CARRY_LIFT = 0.02  # m: mug bottom above the drip tray while carried under the machine's head
+MACHINE_FRONT = 0.10  # m: the mug is slid in from this far in front of the spout (robot side)
+MUG_RELEASE_CLEARANCE = 0.004  # m: mug bottom above the tray when released
+PRESS_HOVER_ABOVE = 0.08  # m: fingertips this far above the button before pressing
+PRESS_OVERTRAVEL = 0.004  # m: fingertips aimed this far below the button's stop
+PRESS_SPEED = 0.008  # m per env step while pressing
 
 PLACEMENTS = (
     Placement("mug", (0.42, 0.13), keepout=0.075),
@@ -133,3 +144,47 @@ class GetCoffee(Task):
             "machine": data.xpos[self._machine].copy(),
             "button": data.xpos[self._button].copy(),
         }
+
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """Grasp the mug, carry it low to the front of the machine, slide it under the spout, set it down,
+        back out, rise over the machine's head and press the button with the closed fingers."""
+        positions = self.object_positions(data)
+        mx, my, mz = positions["mug"]
+        sx, sy, sz = positions["machine"]  # the machine's frame sits on the table under the spout
+        bx, by, _ = positions["button"]
+        carry_z = mz + MUG_CARRY_LIFT + TRAY_TOP
+        release_z = sz + TRAY_TOP + MUG_RELEASE_CLEARANCE + MUG_HALF_HEIGHT
+        front = (sx - MACHINE_FRONT, sy)
+        button_top = sz + HEAD_TOP + 2 * BUTTON_HALF_HEIGHT
+        press_hover_z = button_top + PRESS_HOVER_ABOVE + FINGER_TIP_BEYOND_TCP
+        press_z = button_top - BUTTON_TRAVEL - PRESS_OVERTRAVEL + FINGER_TIP_BEYOND_TCP
+        plan = chain(
+            start,
+            [
+                ("hover_mug", (mx, my, MUG_HOVER_Z), OPEN, TRAVEL_SPEED),
+                ("descend", (mx, my, mz), OPEN, APPROACH_SPEED),
+                ("close", (mx, my, mz), CLOSED, None),
+                ("hold", (mx, my, mz), CLOSED, None),
+                ("lift", (mx, my, carry_z), CLOSED, APPROACH_SPEED),
+                ("carry", (*front, carry_z), CLOSED, TRAVEL_SPEED),
+                ("slide_in", (sx, sy, carry_z), CLOSED, APPROACH_SPEED),
+                ("lower", (sx, sy, release_z), CLOSED, APPROACH_SPEED),
+                ("open", (sx, sy, release_z), OPEN, None),
+                ("back_out", (*front, release_z), OPEN, APPROACH_SPEED),
+                ("rise", (*front, press_hover_z), CLOSED, TRAVEL_SPEED),
+                ("hover_button", (bx, by, press_hover_z), CLOSED, TRAVEL_SPEED),
+            ],
+            MUG_GRASP_YAW,
+        )
+        return [
+            *plan,
+            *chain(
+                plan[-1],
+                [
+                    ("press", (bx, by, press_z), CLOSED, PRESS_SPEED),
+                    ("hold_press", (bx, by, press_z), CLOSED, None),
+                    ("release_button", (bx, by, press_hover_z), CLOSED, TRAVEL_SPEED),
+                ],
+                MUG_GRASP_YAW,
+            ),
+        ]

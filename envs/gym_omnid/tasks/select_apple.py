@@ -8,6 +8,16 @@ import mujoco
 import numpy as np
 
 from gym_omnid.tasks.base import Placement, Task, ring_wall_geoms, sample_layout, yaw_quat
+from gym_omnid.waypoints import (
+    APPROACH_SPEED,
+    CLOSED,
+    GRASP_YAW,
+    OPEN,
+    RETREAT_Z,
+    TRAVEL_SPEED,
+    Waypoint,
+    chain,
+)
 
 APPLE_RADIUS = 0.035  # m
 ORANGE_RADIUS = 0.037  # m
@@ -22,6 +32,10 @@ BOWL_BASE_THICKNESS = 0.008  # m
 BOWL_WALL_SEGMENTS = 16
 DROP_GAP = 0.002  # m: objects are placed this far above their support and settle at reset
 FRUIT_DENSITY = 700.0  # kg / m^3
+# scripted expert
+APPLE_HOVER_Z = 0.20  # m: TCP height above the apple before descending
+APPLE_CARRY_Z = 0.23  # m: TCP height while carrying the apple
+APPLE_RELEASE_CLEARANCE = 0.015  # m: apple bottom above the bowl's base when released
 
 PLACEMENTS = (
     Placement("apple", (0.55, 0.12), keepout=0.07),
@@ -129,3 +143,25 @@ class SelectApple(Task):
 
     def object_positions(self, data: mujoco.MjData) -> dict[str, np.ndarray]:
         return {name: data.xpos[self._body_id(name)].copy() for name in ("apple", "bowl", *DISTRACTORS)}
+
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """Hover, descend around the apple, close, lift, carry over the bowl, lower, open."""
+        positions = self.object_positions(data)
+        ax, ay, az = positions["apple"]
+        bx, by, bz = positions["bowl"]
+        release_z = bz + BOWL_BASE_THICKNESS + APPLE_RELEASE_CLEARANCE + APPLE_RADIUS
+        return chain(
+            start,
+            [
+                ("hover_apple", (ax, ay, APPLE_HOVER_Z), OPEN, TRAVEL_SPEED),
+                ("descend", (ax, ay, az), OPEN, APPROACH_SPEED),
+                ("close", (ax, ay, az), CLOSED, None),
+                ("hold", (ax, ay, az), CLOSED, None),
+                ("lift", (ax, ay, APPLE_CARRY_Z), CLOSED, APPROACH_SPEED),
+                ("carry", (bx, by, APPLE_CARRY_Z), CLOSED, TRAVEL_SPEED),
+                ("lower", (bx, by, release_z), CLOSED, APPROACH_SPEED),
+                ("open", (bx, by, release_z), OPEN, None),
+                ("retreat", (bx, by, RETREAT_Z), OPEN, TRAVEL_SPEED),
+            ],
+            GRASP_YAW,
+        )

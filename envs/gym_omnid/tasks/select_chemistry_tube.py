@@ -8,7 +8,18 @@ from types import MappingProxyType
 import mujoco
 import numpy as np
 
+from gym_omnid.robot import FINGER_TIP_BEYOND_TCP
 from gym_omnid.tasks.base import Placement, Task, sample_layout
+from gym_omnid.waypoints import (
+    APPROACH_SPEED,
+    CLOSED,
+    GRASP_YAW,
+    OPEN,
+    RETREAT_Z,
+    TRAVEL_SPEED,
+    Waypoint,
+    chain,
+)
 
 TUBE_COLOURS = MappingProxyType(
     {  # name -> RGBA of the tube's liquid
@@ -35,6 +46,11 @@ PLACED_XY_TOL = 0.02  # m: tube axis within this distance of the holder centre
 PLACED_MAX_TILT = math.radians(25.0)  # rad: tube axis from vertical
 PLACED_MAX_BOTTOM = 0.04  # m: tube bottom below this height (i.e. inside the holder)
 DROP_GAP = 0.002  # m
+# scripted expert
+TUBE_GRASP_BELOW_TOP = 0.02  # m: TCP this far below the tube's top when grasping
+TUBE_HOVER_ABOVE_TOP = 0.08  # m: TCP this far above the tube's top before descending
+TUBE_CARRY_LIFT = 0.17  # m: how far the tube is lifted out of the rack
+TUBE_RELEASE_CLEARANCE = 0.012  # m: tube bottom above the holder's base when released
 
 PLACEMENTS = (
     Placement("rack", (0.55, 0.17), keepout=0.125),
@@ -186,3 +202,30 @@ class SelectChemistryTube(Task):
         positions["rack"] = data.xpos[self._body_id("rack")].copy()
         positions.update({f"tube_{c}": data.xpos[b].copy() for c, b in self._tubes.items()})
         return positions
+
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """Grasp the named tube near its top, pull it out, carry, lower into the holder. The fingers close
+        along world x (``GRASP_YAW``): across the rack, away from the neighbouring tubes."""
+        positions = self.object_positions(data)
+        tx, ty, tz = positions["target_tube"]
+        hx, hy, hz = positions["holder"]
+        grasp_z = tz + TUBE_LENGTH / 2 - TUBE_GRASP_BELOW_TOP
+        carry_z = grasp_z + TUBE_CARRY_LIFT
+        tcp_above_bottom = TUBE_LENGTH - TUBE_GRASP_BELOW_TOP
+        release_z = hz + HOLDER_BASE_TOP + TUBE_RELEASE_CLEARANCE + tcp_above_bottom
+        hover_z = tz + TUBE_LENGTH / 2 + TUBE_HOVER_ABOVE_TOP + FINGER_TIP_BEYOND_TCP
+        return chain(
+            start,
+            [
+                ("hover_tube", (tx, ty, hover_z), OPEN, TRAVEL_SPEED),
+                ("descend", (tx, ty, grasp_z), OPEN, APPROACH_SPEED),
+                ("close", (tx, ty, grasp_z), CLOSED, None),
+                ("hold", (tx, ty, grasp_z), CLOSED, None),
+                ("lift", (tx, ty, carry_z), CLOSED, APPROACH_SPEED),
+                ("carry", (hx, hy, carry_z), CLOSED, TRAVEL_SPEED),
+                ("lower", (hx, hy, release_z), CLOSED, APPROACH_SPEED),
+                ("open", (hx, hy, release_z), OPEN, None),
+                ("retreat", (hx, hy, RETREAT_Z), OPEN, TRAVEL_SPEED),
+            ],
+            GRASP_YAW,
+        )

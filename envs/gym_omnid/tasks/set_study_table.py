@@ -7,7 +7,17 @@ import math
 import mujoco
 import numpy as np
 
+from gym_omnid.robot import FINGER_TIP_BEYOND_TCP
 from gym_omnid.tasks.base import Placement, Task, sample_layout, yaw_quat
+from gym_omnid.waypoints import (
+    APPROACH_SPEED,
+    CLOSED,
+    OPEN,
+    RETREAT_Z,
+    TRAVEL_SPEED,
+    Waypoint,
+    chain,
+)
 
 BOOK_HALF = (0.075, 0.032, 0.02)  # m: half sizes (length along its x, width, thickness)
 BOOK_DENSITY = 400.0  # kg / m^3
@@ -27,6 +37,16 @@ LID_DENSITY = 600.0  # kg / m^3
 LID_DAMPING = 0.03  # N m s / rad: hinge damping (the lid falls shut once pushed past upright)
 LID_CLOSED = math.radians(6.0)  # rad: hinge angle below which the laptop counts as closed
 DROP_GAP = 0.002  # m
+# scripted expert
+PUSHER_YAW = math.pi / 2  # rad: the closed fingers push the lid with their broad side
+LID_PUSH_TIP_Z = 0.09  # m: fingertip height while pushing the open lid (below its top edge)
+LID_HOVER_CLEARANCE = 0.05  # m: fingertips this far above the open lid's top before descending
+LID_PUSH_START = 0.10  # m: fingertips start this far behind the hinge (beyond the open lid)
+LID_PUSH_END = 0.03  # m: and push to this far in front of it (lid past upright, it falls shut)
+BOOK_GRASP_TIP_Z = 0.004  # m: fingertip height above the table when grasping the book
+BOOK_HOVER_Z = 0.18  # m: TCP height above the book before descending
+BOOK_CARRY_Z = 0.20  # m: TCP height while carrying the book over the shelf
+BOOK_RELEASE_CLEARANCE = 0.006  # m: book bottom above the shelf's board when released
 
 PLACEMENTS = (
     Placement("book", (0.4, 0.15), keepout=0.09),
@@ -137,3 +157,43 @@ class SetStudyTable(Task):
             "laptop": data.xpos[self._laptop].copy(),
             "lid_hinge": data.xpos[self._lid].copy(),
         }
+
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """Push the open lid past upright with the closed fingers (it falls shut, away from the fingers,
+        while the arm moves on to the book), then pick the book and lay it on the shelf."""
+        positions = self.object_positions(data)
+        hx, hy, hz = positions["lid_hinge"]
+        kx, ky, kz = positions["book"]
+        fx, fy, fz = positions["shelf"]
+        push_z = LID_PUSH_TIP_Z + FINGER_TIP_BEYOND_TCP
+        behind = hx + LID_PUSH_START
+        hover_z = hz + 2 * LAPTOP_BASE_HALF[0] + LID_HOVER_CLEARANCE + FINGER_TIP_BEYOND_TCP
+        grasp_z = kz - BOOK_HALF[2] + BOOK_GRASP_TIP_Z + FINGER_TIP_BEYOND_TCP
+        release_z = fz + SHELF_TOP + BOOK_RELEASE_CLEARANCE + (grasp_z - (kz - BOOK_HALF[2]))
+        book_yaw = self.body_yaw(data, "book") + math.pi / 2  # close across the book's width
+        lid = chain(
+            start,
+            [
+                ("hover_lid", (behind, hy, hover_z), CLOSED, TRAVEL_SPEED),
+                ("settle", (behind, hy, hover_z), CLOSED, None),  # the arm lags the target after travel
+                ("descend_behind", (behind, hy, push_z), CLOSED, APPROACH_SPEED),
+                ("push_lid", (hx - LID_PUSH_END, hy, push_z), CLOSED, APPROACH_SPEED),
+            ],
+            PUSHER_YAW,
+        )
+        book = chain(
+            lid[-1],
+            [
+                ("hover_book", (kx, ky, BOOK_HOVER_Z), OPEN, TRAVEL_SPEED),
+                ("descend", (kx, ky, grasp_z), OPEN, APPROACH_SPEED),
+                ("close", (kx, ky, grasp_z), CLOSED, None),
+                ("hold", (kx, ky, grasp_z), CLOSED, None),
+                ("lift", (kx, ky, BOOK_CARRY_Z), CLOSED, APPROACH_SPEED),
+                ("carry", (fx, fy, BOOK_CARRY_Z), CLOSED, TRAVEL_SPEED),
+                ("lower", (fx, fy, release_z), CLOSED, APPROACH_SPEED),
+                ("open", (fx, fy, release_z), OPEN, None),
+                ("retreat", (fx, fy, RETREAT_Z), OPEN, TRAVEL_SPEED),
+            ],
+            book_yaw,
+        )
+        return [*lid, *book]

@@ -8,7 +8,17 @@ from types import MappingProxyType
 import mujoco
 import numpy as np
 
+from gym_omnid.robot import FINGER_TIP_BEYOND_TCP
 from gym_omnid.tasks.base import Placement, Task, sample_layout, yaw_quat
+from gym_omnid.waypoints import (
+    APPROACH_SPEED,
+    CLOSED,
+    OPEN,
+    RETREAT_Z,
+    TRAVEL_SPEED,
+    Waypoint,
+    chain,
+)
 
 CARD_SUITS = MappingProxyType(
     {  # card name -> RGBA of the mark printed on its face
@@ -31,6 +41,13 @@ ON_MAT_MARGIN = 0.01  # m: the card's centre lies this far inside the mat's edge
 CARD_MAX_TILT = math.radians(20.0)  # rad: the card lies flat
 CARD_MAX_LIFT = 0.006  # m: card bottom at most this far above the mat (it lies on it)
 DROP_GAP = 0.001  # m
+# scripted expert
+CARD_PREGRASP = 0.25  # gripper command while approaching a card: fingers 6.75 cm apart, clear of
+# the neighbouring cards 9 cm away
+CARD_GRASP_TIP_Z = 0.002  # m: fingertip height above the table when grasping a card
+CARD_HOVER_Z = 0.15  # m: TCP height above the card before descending
+CARD_CARRY_Z = 0.15  # m: TCP height while carrying the card
+CARD_RELEASE_CLEARANCE = 0.004  # m: card bottom above the mat when released
 
 PLACEMENTS = (
     Placement("cards", (0.55, 0.15), keepout=0.17),
@@ -136,3 +153,28 @@ class TexasHoldem(Task):
             "mat": data.xpos[self._mat].copy(),
             **cards,
         }
+
+    def plan_expert(self, data: mujoco.MjData, start: Waypoint) -> list[Waypoint]:
+        """Approach the named card with the fingers partly open (clear of its neighbours), pinch it across
+        its width just above the table, carry it over the mat, lower, open."""
+        positions = self.object_positions(data)
+        cx, cy, cz = positions["target_card"]
+        mx, my, mz = positions["mat"]
+        card_yaw = self.body_yaw(data, f"card_{self.target}") + math.pi / 2
+        grasp_z = cz - CARD_HALF[2] + CARD_GRASP_TIP_Z + FINGER_TIP_BEYOND_TCP
+        release_z = mz + 2 * MAT_HALF[2] + CARD_RELEASE_CLEARANCE + CARD_GRASP_TIP_Z + FINGER_TIP_BEYOND_TCP
+        return chain(
+            start,
+            [
+                ("hover_card", (cx, cy, CARD_HOVER_Z), CARD_PREGRASP, TRAVEL_SPEED),
+                ("descend", (cx, cy, grasp_z), CARD_PREGRASP, APPROACH_SPEED),
+                ("close", (cx, cy, grasp_z), CLOSED, None),
+                ("hold", (cx, cy, grasp_z), CLOSED, None),
+                ("lift", (cx, cy, CARD_CARRY_Z), CLOSED, APPROACH_SPEED),
+                ("carry", (mx, my, CARD_CARRY_Z), CLOSED, TRAVEL_SPEED),
+                ("lower", (mx, my, release_z), CLOSED, APPROACH_SPEED),
+                ("open", (mx, my, release_z), OPEN, None),
+                ("retreat", (mx, my, RETREAT_Z), OPEN, TRAVEL_SPEED),
+            ],
+            card_yaw,
+        )
