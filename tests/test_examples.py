@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -57,6 +58,22 @@ def test_record_train_evaluate(workflow_env):
     run_example("03_evaluate.sh", env)
     for setting in ("id_id", "position_ood_id", "id_ood1"):
         success_info(out / f"eval_bcde_{setting}")
+
+
+def test_python_example_runs_the_checkpoint_for_one_episode(workflow_env):
+    out, env = workflow_env
+    checkpoint = out / "train_bcde" / "checkpoints" / "last" / "pretrained_model"
+    assert checkpoint.is_dir(), "trained by test_record_train_evaluate (run this module in order)"
+    result = subprocess.run(
+        [sys.executable, str(EXAMPLES / "08_run_checkpoint.py"), f"--checkpoint={checkpoint}",
+         "--task=select_apple", "--seed=1", "--device=cpu", "--max-steps=3"],
+        env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert result.returncode == 0, f"{result.stdout[-2000:]}\n{result.stderr[-4000:]}"
+    lines = result.stdout.splitlines()
+    # The env observes the checkpoint's cameras at its training image size (IMAGE_SIZE=64).
+    assert "cameras cam_b, cam_c, cam_d, cam_e at 64x64 pixels" in lines
+    assert re.fullmatch(r"select_apple, seed 1: (success after [1-3]|failure after 3) steps", lines[-1])
 
 
 def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(workflow_env):

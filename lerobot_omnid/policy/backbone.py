@@ -2,17 +2,76 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import torch
 import torchvision
 from torch import Tensor, nn
 from torch.utils.checkpoint import checkpoint
+from torchvision.models import WeightsEnum
 
 # ImageNet statistics: a fixed normalisation that does not depend on which camera an image comes from.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 GROUP_NORM_CHANNELS_PER_GROUP = 16
+# "ResNet18_Weights.IMAGENET1K_V1" (any architecture) or a bare member such as "IMAGENET1K_V1" / "DEFAULT".
+_QUALIFIED_WEIGHTS_NAME = re.compile(r"\w+_Weights\.\w+")
+_MEMBER_NAME = re.compile(r"[A-Z][A-Z0-9_]*")
+
+
+def resolve_backbone_weights(name: str, value: str) -> Path | WeightsEnum:
+    """What ``pretrained_backbone_weights=value`` means for the torchvision model ``name``.
+
+    As LeRobot's diffusion policy: a torchvision weights name of that model ("ResNet18_Weights.IMAGENET1K_V1",
+    or torchvision's short forms "IMAGENET1K_V1" and "DEFAULT"); besides, an existing local state-dict file
+    (checked first). Anything else raises an error naming the field, the expected forms and ``value``.
+    """
+    path = Path(value).expanduser()
+    if path.is_file():
+        return path
+    weights_enum = torchvision.models.get_model_weights(name)
+    member = value.removeprefix(f"{weights_enum.__name__}.")
+    if member in weights_enum.__members__:
+        return weights_enum[member]
+    names = ", ".join(f"{weights_enum.__name__}.{m}" for m in weights_enum.__members__)
+    expected = f"a local state-dict file or a torchvision weights name for {name} ({names})"
+    if _QUALIFIED_WEIGHTS_NAME.fullmatch(value):
+        try:
+            other = torchvision.models.get_weight(value)
+        except (ValueError, KeyError):
+            other = None
+        if other is not None:
+            raise ValueError(
+                f"`pretrained_backbone_weights`: {value!r} are weights of another architecture "
+                f"({type(other).__name__}) but `vision_backbone` is {name!r}; expected {expected}"
+            )
+    if _QUALIFIED_WEIGHTS_NAME.fullmatch(value) or _MEMBER_NAME.fullmatch(value):
+        raise ValueError(
+            f"`pretrained_backbone_weights`: no torchvision weights named {value!r} for {name} (and no file "
+            f"of that name); expected {expected}"
+        )
+    raise FileNotFoundError(
+        f"`pretrained_backbone_weights`: no file at {path}, and not a torchvision weights name; "
+        f"expected {expected}, got {value!r}"
+    )
+
+
+def download_backbone_weights(name: str, weights: WeightsEnum) -> dict[str, Tensor]:
+    """torchvision's state dict for ``weights`` (torch's hub cache, else downloaded); clear error offline."""
+    qualified = f"{type(weights).__name__}.{weights.name}"
+    try:
+        return torch.hub.load_state_dict_from_url(
+            weights.url, map_location="cpu", progress=True, check_hash=True
+        )
+    except OSError as err:  # URLError, socket errors, timeouts
+        raise ConnectionError(
+            f"`--policy.pretrained_backbone_weights={qualified}`: torchvision could not download these "
+            f"weights from {weights.url} ({err}); this machine seems to be offline. Pass a local state-dict "
+            f"file instead: on a machine that is online run `torch.save(torchvision.models.{name}("
+            f'weights="{qualified}").state_dict(), "{name}_{weights.name.lower()}.pt")`, copy the file here '
+            f"and pass `--policy.pretrained_backbone_weights=/path/to/{name}_{weights.name.lower()}.pt`."
+        ) from err
 
 
 class ResNetFeatures(nn.Module):
@@ -22,8 +81,10 @@ class ResNetFeatures(nn.Module):
         name: torchvision constructor name ("resnet18", ..., "resnet101").
         backbone_layer: 2 (stride 8), 3 (stride 16) or 4 (stride 32).
         use_group_norm: GroupNorm instead of BatchNorm.
-        weights_path: optional local torchvision state dict (e.g. ImageNet weights saved with
-            ``torch.save(model.state_dict(), path)``); nothing is downloaded.
+        weights_path: optional pretrained weights, see :func:`resolve_backbone_weights`: a local
+            torchvision state dict (e.g. ImageNet weights saved with ``torch.save(model.state_dict(),
+            path)``) or a torchvision weights name such as "ResNet18_Weights.IMAGENET1K_V1" (downloaded
+            by torchvision, so only where the machine is online).
         gradient_checkpointing: in training, keep only each stage's output and recompute the rest in the
             backward pass.
     """
@@ -51,11 +112,18 @@ class ResNetFeatures(nn.Module):
 
         resnet = getattr(torchvision.models, name)(weights=None, norm_layer=norm_layer)
         if weights_path is not None:
-            path = Path(weights_path)
-            if not path.is_file():
-                raise FileNotFoundError(f"`pretrained_backbone_weights`: no file at {path}")
-            state = torch.load(path, map_location="cpu", weights_only=True)
-            resnet.load_state_dict(state)
+            source = resolve_backbone_weights(name, weights_path)
+            if isinstance(source, Path):
+                state = torch.load(source, map_location="cpu", weights_only=True)
+            else:
+                state = download_backbone_weights(name, source)
+            try:
+                resnet.load_state_dict(state)
+            except RuntimeError as err:
+                raise ValueError(
+                    f"`pretrained_backbone_weights`: {weights_path!r} is not a state dict of torchvision "
+                    f"{name}: {err}"
+                ) from err
         stages = [resnet.layer1, resnet.layer2, resnet.layer3, resnet.layer4][:backbone_layer]
         self.stem = nn.Sequential(resnet.conv1, resnet.bn1, resnet.relu, resnet.maxpool)
         self.stages = nn.ModuleList(stages)
