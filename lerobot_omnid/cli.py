@@ -8,9 +8,15 @@ from typing import Any
 
 
 def check_choice(field_name: str, value: Any, allowed: Collection) -> None:
-    """Raise ``ValueError("`field` must be one of [...], got value")`` unless ``value`` is allowed."""
+    """Raise ``ValueError("`field`: expected one of [...], got value")`` unless ``value`` is allowed."""
     if value not in allowed:
-        raise ValueError(f"`{field_name}` must be one of {list(allowed)}, got {value!r}")
+        raise ValueError(f"`{field_name}`: expected one of {list(allowed)}, got {value!r}")
+
+
+def check_positive_int(field_name: str, value: Any) -> None:
+    """Raise ``ValueError("`field`: expected a positive integer, got value")`` unless an int >= 1."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"`{field_name}`: expected a positive integer, got {value!r}")
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:

@@ -34,7 +34,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
 from lerobot_omnid.calibration.schema import CameraCalibration
-from lerobot_omnid.cli import check_choice
+from lerobot_omnid.cli import check_choice, check_positive_int
 
 ENV_PACKAGE = "gym_omnid"
 """Python package that registers the gym ids ``gym_omnid/<task>``."""
@@ -111,14 +111,7 @@ class OmniDEnvConfig(EnvConfig):
         check_choice("layout", self.layout, LAYOUTS)
         check_choice("background", self.background, BACKGROUNDS)
         validate_image_size("image_size", self.image_size)
-        if (
-            isinstance(self.episode_length, bool)
-            or not isinstance(self.episode_length, int)
-            or self.episode_length < 1
-        ):
-            raise ValueError(
-                f"episode_length: expected a positive int number of env steps, got {self.episode_length!r}"
-            )
+        check_positive_int("episode_length", self.episode_length)
         if self.fps != CONTROL_FPS:
             raise ValueError(
                 f"fps: the omnid envs step at a fixed {CONTROL_FPS} Hz; expected {CONTROL_FPS}, "

@@ -12,8 +12,12 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from lerobot_omnid.cli import check_choice
+
 AXES = ("x", "y", "z")
 DEPTH_EPS = 1e-3  # metres; points closer than this to the camera plane count as behind it.
+PAPER_VOLUME_BOUNDS = ((0.0, 1.152), (-0.64, 0.64), (0.0, 0.768))
+"""The paper's feature volume in the robot base frame, metres: (x, y, z) (min, max) pairs."""
 
 
 @dataclass(frozen=True)
@@ -34,8 +38,7 @@ class FeatureVolume:
     pillar_axis: str = "z"
 
     def __post_init__(self) -> None:
-        if self.pillar_axis not in AXES:
-            raise ValueError(f"pillar_axis must be one of {AXES}, got {self.pillar_axis!r}")
+        check_choice("pillar_axis", self.pillar_axis, AXES)
         if len(self.bounds) != 3 or any(len(b) != 2 or not b[0] < b[1] for b in self.bounds):
             raise ValueError(f"bounds must be three (min, max) pairs with min < max, got {self.bounds}")
         if len(self.shape) != 3 or any(int(n) < 1 for n in self.shape):
@@ -151,17 +154,6 @@ def camera_centers_world(cam_T_world: Tensor) -> Tensor:
     R = cam_T_world[..., :3, :3]
     t = cam_T_world[..., :3, 3:]
     return -(R.transpose(-1, -2) @ t)[..., 0]
-
-
-def scale_intrinsics(pix_T_cam: Tensor, from_hw: tuple[int, int], to_hw: tuple[int, int]) -> Tensor:
-    """Intrinsics after resizing a whole image from ``from_hw`` to ``to_hw`` (pixel centres at integers)."""
-    sy, sx = to_hw[0] / from_hw[0], to_hw[1] / from_hw[1]
-    K = pix_T_cam.clone()
-    K[..., 0, :] *= sx
-    K[..., 1, :] *= sy
-    K[..., 0, 2] += 0.5 * sx - 0.5
-    K[..., 1, 2] += 0.5 * sy - 0.5
-    return K
 
 
 def look_at(eye_world: Tensor, target_world: Tensor, up_world: Tensor | None = None) -> Tensor:

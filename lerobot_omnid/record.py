@@ -36,7 +36,7 @@ from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES, OBS_STA
 from tqdm import tqdm
 
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
-from lerobot_omnid.cli import positive_int
+from lerobot_omnid.cli import check_positive_int, positive_int
 from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras, validate_image_size
 
 ROBOT_TYPE = "omnid_sim_arm"
@@ -204,8 +204,7 @@ def record_dataset(
         push_to_hub: Upload with LeRobot's ``push_to_hub`` when the recording completes.
         show_progress: Show a tqdm bar over episodes.
     """
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes: expected a positive int, got {episodes!r}")
+    check_positive_int("episodes", episodes)
     max_attempts = 2 * episodes + 10 if max_attempts is None else max_attempts
     if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < episodes:
         raise ValueError(f"max_attempts: expected an int >= episodes ({episodes}), got {max_attempts!r}")

@@ -27,17 +27,11 @@ from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
 from test_attach_calibration import CAMS, REPO_ID, SIZE, make_uncalibrated_dataset
 
 from lerobot_omnid.calibration.attach_calibration import main as attach_main
-from lerobot_omnid.calibration.calibrate import (
-    BoardSpec,
-    board_image,
-    detect_board,
-    load_board_pose,
-    main,
-    world_T_board_from_points,
-    world_T_board_on_table,
-)
+from lerobot_omnid.calibration.board import BoardSpec, board_image, detect_board
+from lerobot_omnid.calibration.calibrate import main
 from lerobot_omnid.calibration.rig_file import load_calibration_file, load_calibration_meta
 from lerobot_omnid.calibration.schema import CalibrationError
+from lerobot_omnid.calibration.solve import load_board_pose, world_T_board_from_points, world_T_board_on_table
 
 HEIGHT, WIDTH = 480, 640
 PX_PER_SQUARE = 64  # texture pixels per board square
@@ -398,7 +392,7 @@ def test_extrinsics_only_after_a_camera_moved(renders, env_truth, tmp_path, caps
 
 
 def test_readme_walkthrough_commands_parse():
-    """The commands of the "bring your own robot" walkthrough (docs/calibration.md) are valid for our parsers."""
+    """The commands of the "bring your own robot" walkthrough (docs/calibration.md) parse."""
     import shlex
 
     from lerobot_omnid.calibration import attach_calibration

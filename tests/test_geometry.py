@@ -12,7 +12,6 @@ from lerobot_omnid.geometry import (
     pixels_to_grid,
     project_to_grid,
     project_to_pixels,
-    scale_intrinsics,
 )
 
 K = torch.tensor([[100.0, 0.0, 50.0], [0.0, 120.0, 40.0], [0.0, 0.0, 1.0]])
@@ -75,15 +74,6 @@ def test_grid_sample_reads_the_projected_pixel():
     image[0, 0, 33, 71] = 1.0  # v = 33, u = 71
     grid = pixels_to_grid(torch.tensor([[71.0, 33.0]]), (80, 100)).view(1, 1, 1, 2)
     assert F.grid_sample(image, grid, align_corners=False).item() == pytest.approx(1.0)
-
-
-def test_scale_intrinsics_matches_resized_pixel_centres():
-    xyz_cam = torch.tensor([[0.3, -0.2, 1.5]])
-    uv, _ = project_to_pixels(K, xyz_cam)
-    K_half = scale_intrinsics(K, (80, 100), (40, 25))
-    uv_half, _ = project_to_pixels(K_half, xyz_cam)
-    expected = (uv + 0.5) * torch.tensor([25 / 100, 40 / 80]) - 0.5
-    assert torch.allclose(uv_half, expected, atol=1e-5)
 
 
 def test_look_at_centres_target_and_round_trips_eye():

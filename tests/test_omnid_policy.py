@@ -7,7 +7,7 @@ import torch
 from lerobot.configs.types import FeatureType, PolicyFeature
 from omnid_testing import ACTION_DIM, STATE_DIM, random_batch, synthetic_calibration, tiny_config
 
-from lerobot_omnid.calibration.schema import CalibrationError
+from lerobot_omnid.calibration.schema import CalibrationError, CameraCalibration
 from lerobot_omnid.geometry import look_at
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
@@ -34,26 +34,29 @@ def use_cameras(policy: OmniDPolicy, cams: tuple[str, ...]) -> None:
         **others,
         **{k: PolicyFeature(FeatureType.VISUAL, (3, SIZE, SIZE)) for k in keys},
     }
-    policy.config.camera_calibration = {
-        k: synthetic_calibration(c, SIZE) for k, c in zip(keys, cams, strict=True)
-    }
+    policy.set_calibration(
+        {
+            k: CameraCalibration.from_dict(synthetic_calibration(c, SIZE))
+            for k, c in zip(keys, cams, strict=True)
+        }
+    )
 
 
 def ofg_inputs(policy: OmniDPolicy, batch_size: int):
-    pix_T_cam, cam_T_world = policy.camera_matrices(batch_size, (SIZE, SIZE), torch.device("cpu"))
+    pix_T_cam, cam_T_world = policy.camera_matrices(batch_size, (SIZE, SIZE))
     return pix_T_cam.clone(), cam_T_world.clone()
 
 
 def test_config_validation_messages():
-    with pytest.raises(ValueError, match="`vision_backbone` must be one of"):
+    with pytest.raises(ValueError, match="`vision_backbone`: expected one of"):
         tiny_config(vision_backbone="vgg16")
     with pytest.raises(ValueError, match="divisible by `num_heads`"):
         tiny_config(d_model=30, num_heads=4)
     with pytest.raises(ValueError, match="multiple of 2\\*\\*len\\(down_dims\\)"):
         tiny_config(horizon=10)
-    with pytest.raises(ValueError, match="`pillar_axis` must be one of"):
+    with pytest.raises(ValueError, match="`pillar_axis`: expected one of"):
         tiny_config(pillar_axis="w")
-    with pytest.raises(ValueError, match="`plane_readout` must be one of"):
+    with pytest.raises(ValueError, match="`plane_readout`: expected one of"):
         tiny_config(plane_readout="mean")
     with pytest.raises(ValueError, match="volume_bounds"):
         tiny_config(volume_bounds=((1.0, 0.0), (0.0, 1.0), (0.0, 1.0)))
@@ -205,14 +208,21 @@ def test_without_ofg_ablation_trains_and_acts():
     assert policy.select_action(observation(policy.config)).shape == (1, ACTION_DIM)
 
 
-def test_resize_rescales_intrinsics():
-    policy = OmniDPolicy(tiny_config(resize_shape=(32, 32))).eval()
+def test_resize_shape_resizes_images_and_intrinsics_together():
+    """With ``resize_shape`` the backbone sees resized images and the anchors project with the matching K:
+    they land where the full-size policy puts them in the image. Fails if either half ignores the option."""
+    resized = OmniDPolicy(tiny_config(resize_shape=(32, 32))).eval()
+    full = OmniDPolicy(tiny_config()).eval()
     images = torch.rand(1, 1, 4, 3, SIZE, SIZE)
-    pix_T_cam, cam_T_world = ofg_inputs(policy, 1)
-    _, out_resized = policy.model.encode_images(images, pix_T_cam, cam_T_world)
-    reference = OmniDPolicy(tiny_config()).eval()
-    _, out_full = reference.model.encode_images(images, pix_T_cam, cam_T_world)
-    # Grid coordinates are resolution independent: the same anchors land at the same relative place.
+    seen = {}
+    resized.model.backbone.register_forward_hook(lambda m, i, o: seen.update(resized=tuple(i[0].shape[-2:])))
+    full.model.backbone.register_forward_hook(lambda m, i, o: seen.update(full=tuple(i[0].shape[-2:])))
+    pix_T_cam, cam_T_world = resized.camera_matrices(1, (SIZE, SIZE))
+    _, out_resized = resized.model.encode_images(images, pix_T_cam, cam_T_world)
+    _, out_full = full.model.encode_images(images, *full.camera_matrices(1, (SIZE, SIZE)))
+    assert seen == {"resized": (32, 32), "full": (SIZE, SIZE)}
+    full_K = full.camera_matrices(1, (SIZE, SIZE))[0]
+    assert pix_T_cam[0, 0, 0, 0].item() == pytest.approx(full_K[0, 0, 0, 0].item() / 2)
     assert torch.allclose(out_resized.geometry.anchor_grid, out_full.geometry.anchor_grid, atol=1e-5)
 
 

@@ -233,7 +233,7 @@ def test_main_records_and_prints_summary(tmp_path, capsys):
         (["--cameras", "cam_b,cam_z"], ["--cameras", "cam_z", "cam_a"]),
         (["--layout", "far"], ["--layout", "far", "position_ood"]),
         (["--background", "ood9"], ["--background", "ood9", "ood4"]),
-        (["--episodes", "0"], ["--episodes", "positive", "0"]),
+        (["--episodes", "0"], ["--episodes", ">= 1", "0"]),
         (["--image-size", "-1"], ["--image-size", "-1"]),
         (["--image-size", "5000"], ["--image-size", "2048", "5000"]),
         (["--episodes", "3", "--max-attempts", "2"], ["--max-attempts", "3", "2"]),
@@ -264,11 +264,11 @@ def test_refuses_to_overwrite_non_empty_root(tmp_path, capsys):
 
 
 def test_record_dataset_rejects_bad_arguments(tmp_path):
-    with pytest.raises(ValueError, match="episodes: expected a positive int, got 0"):
+    with pytest.raises(ValueError, match="`episodes`: expected a positive integer, got 0"):
         record_dataset(tmp_path / "a", episodes=0)
     with pytest.raises(ValueError, match="cameras: unknown camera"):
         record_dataset(tmp_path / "a", episodes=1, cameras=["cam_q"])
-    with pytest.raises(ValueError, match="`task` must be one of"):
+    with pytest.raises(ValueError, match="`task`: expected one of"):
         record_dataset(tmp_path / "a", episodes=1, task="make_tea")
     assert not (tmp_path / "a").exists()
 

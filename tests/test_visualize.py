@@ -14,7 +14,7 @@ import torch
 from omnid_testing import make_tiny_dataset, tiny_config
 from PIL import Image
 
-from lerobot_omnid.calibration.schema import CameraCalibration
+from lerobot_omnid.calibration.schema import CameraCalibration, camera_matrices
 from lerobot_omnid.env_config import calibration_dict
 from lerobot_omnid.geometry import FeatureVolume, pixels_to_grid
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
@@ -31,7 +31,6 @@ from lerobot_omnid.viz.drawing import (
 )
 from lerobot_omnid.viz.viz import (
     VizError,
-    camera_matrices,
     main,
     resolve_calibrations,
     visualize,
@@ -233,7 +232,7 @@ def test_env_png_projects_objects_onto_their_pixels(env_checkpoint, tmp_path) ->
 
     # The drawn anchors (from the OFG's own projection) agree with the drawing's projection function.
     volume = tiny_config().feature_volume
-    pix_T_cam, cam_T_world = camera_matrices(calibs, (ENV_SIZE, ENV_SIZE))
+    pix_T_cam, cam_T_world = camera_matrices(calibs, [(ENV_SIZE, ENV_SIZE)] * len(calibs))
     anchors = volume.anchors_world()[anchor_lattice(volume, 10_000)]
     uv_pix, visible = project_points(pix_T_cam, cam_T_world, anchors, (ENV_SIZE, ENV_SIZE))
     np.testing.assert_array_equal(visible.numpy(), frame.anchor_visible)

@@ -13,10 +13,11 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from gym_omnid import WORKSPACE_BOUNDS
+
 BIN = Path(sys.executable).parent
-TRAIN_CAMERAS = ("cam_b", "cam_c", "cam_d", "cam_e")
-# The benchmark's workspace in the robot base frame (objects lie in x 0.3..0.8, y -0.3..0.35), metres.
-SIM_VOLUME_BOUNDS = "[[0.2,0.84],[-0.4,0.4],[0.0,0.32]]"
+SIM_VOLUME_BOUNDS = json.dumps(WORKSPACE_BOUNDS, separators=(",", ":"))
+"""``--policy.volume_bounds`` of the benchmark's OmniD runs: the envs' workspace, which holds every object."""
 CHECKPOINT = Path("checkpoints") / "last" / "pretrained_model"
 """Where ``lerobot-train`` leaves the final checkpoint, relative to its ``--output_dir``."""
 

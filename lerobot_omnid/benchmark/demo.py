@@ -17,12 +17,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from gym_omnid import TRAIN_CAMERAS
 from tqdm import tqdm
 
 from lerobot_omnid.benchmark.commands import (
     CHECKPOINT,
     SIM_VOLUME_BOUNDS,
-    TRAIN_CAMERAS,
     env_cameras,
     eval_command,
     is_evaluated,

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import gym_omnid.constants
+from gym_omnid import TRAIN_CAMERAS
 from gym_omnid.constants import STATE_DIM
 
 from lerobot_omnid.benchmark.commands import (
     BIN,
     SIM_VOLUME_BOUNDS,
-    TRAIN_CAMERAS,
     eval_command,
     is_evaluated,
     is_trained,

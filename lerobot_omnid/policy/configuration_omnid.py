@@ -16,8 +16,8 @@ from lerobot_omnid.calibration.schema import (
     CameraCalibration,
     calibration_from_feature_info,
 )
-from lerobot_omnid.cli import check_choice
-from lerobot_omnid.geometry import AXES, FeatureVolume
+from lerobot_omnid.cli import check_choice, check_positive_int
+from lerobot_omnid.geometry import AXES, PAPER_VOLUME_BOUNDS, FeatureVolume
 from lerobot_omnid.keys import image_key
 
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
@@ -52,7 +52,9 @@ class OmniDConfig(PreTrainedConfig):
         cameras: Which of the dataset's cameras the policy uses, by name ("cam_b") or feature key
             ("observation.images.cam_b"); None uses every image feature of the dataset.
         calibration_path: A calibration file (``lerobot_omnid.calibration.rig_file``) whose cameras override
-            ``camera_calibration`` and the dataset's, e.g. to evaluate on a rig whose cameras moved.
+            ``camera_calibration`` and the dataset's, e.g. to evaluate on a rig whose cameras moved. Read
+            once when the config is made and merged into ``camera_calibration``; then set to None, so a
+            saved ``config.json`` carries the calibration itself and never depends on the file.
         vision_backbone: torchvision ResNet shared by all cameras ("resnet18"; "resnet101" for the
             paper's ablation).
         pretrained_backbone_weights: Pretrained backbone weights, as LeRobot's diffusion policy takes them:
@@ -138,7 +140,7 @@ class OmniDConfig(PreTrainedConfig):
 
     # Omni-Feature Generator.
     use_ofg: bool = True
-    volume_bounds: tuple[tuple[float, float], ...] = ((0.0, 1.152), (-0.64, 0.64), (0.0, 0.768))
+    volume_bounds: tuple[tuple[float, float], ...] = PAPER_VOLUME_BOUNDS
     volume_shape: tuple[int, int, int] = (64, 16, 64)
     pillar_axis: str = "z"
     d_model: int = 128
@@ -201,8 +203,7 @@ class OmniDConfig(PreTrainedConfig):
             "horizon",
             "n_action_steps",
         ):
-            if getattr(self, name) < 1:
-                raise ValueError(f"`{name}` must be a positive integer, got {getattr(self, name)}")
+            check_positive_int(name, getattr(self, name))
         if self.d_model % self.num_heads:
             raise ValueError(
                 f"`d_model` ({self.d_model}) must be divisible by `num_heads` ({self.num_heads})"
@@ -225,14 +226,18 @@ class OmniDConfig(PreTrainedConfig):
             self.feature_volume  # noqa: B018  (validates bounds and shape)
         except ValueError as e:
             raise ValueError(f"`volume_bounds` / `volume_shape`: {e}") from e
-        for key, calib in self.camera_calibration.items():
-            CameraCalibration.from_dict(calib, camera=key)
-        self.camera_calibration.update(self._file_calibrations())
-
-    def _file_calibrations(self) -> dict[str, dict]:
-        if self.calibration_path is None:
-            return {}
-        return {k: c.to_dict() for k, c in load_calibration_file(self.calibration_path).items()}
+        # Validated once, kept in the canonical JSON form that config.json stores.
+        self.camera_calibration = {
+            key: CameraCalibration.from_dict(calib, camera=key).to_dict()
+            for key, calib in self.camera_calibration.items()
+        }
+        # A calibration file is read once, here, and merged; the saved config never refers to it again.
+        self._calibration_overrides: dict[str, dict] = {}
+        if self.calibration_path is not None:
+            from_file = load_calibration_file(self.calibration_path)
+            self._calibration_overrides = {key: calib.to_dict() for key, calib in from_file.items()}
+            self.camera_calibration.update(self._calibration_overrides)
+            self.calibration_path = None
 
     def _select_cameras(self) -> None:
         """Restrict (or extend) the image inputs to ``cameras``; a camera the features do not list yet
@@ -282,8 +287,8 @@ class OmniDConfig(PreTrainedConfig):
                 raise ValueError(f"`cameras`: {missing} not among the dataset's image features {image_keys}")
             image_keys = wanted
         # The "w/o OFG" ablation does not use calibration: keep whatever the dataset has.
-        # A calibration file overrides the dataset's calibration.
-        from_file = self._file_calibrations()
+        # A calibration file given with this config overrides the dataset's calibration.
+        from_file = self._calibration_overrides
         self.camera_calibration = {
             k: from_file[k]
             if k in from_file

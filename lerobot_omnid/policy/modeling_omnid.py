@@ -6,6 +6,7 @@ Shape legend: B batch, T observation steps, S cameras, H W image, Da action dim,
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Mapping
 
 import torch
 import torch.nn.functional as F
@@ -18,7 +19,7 @@ from lerobot.policies.utils import get_output_shape, populate_queues
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_omnid.geometry import scale_intrinsics
+from lerobot_omnid.calibration.schema import CameraCalibration, camera_matrices
 from lerobot_omnid.policy.backbone import ResNetFeatures
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.model_card import find_eval_results, omnid_card_section
@@ -42,6 +43,15 @@ class OmniDPolicy(PreTrainedPolicy):
         config.validate_features()
         self.config = config
         self.model = OmniDModel(config)
+        # The cameras' matrices for the backbone's input size: parsed from the config once, kept as buffers
+        # (they follow .to(device); not saved, config.json holds the calibration), rebuilt only when the
+        # calibration, the cameras or the input size change.
+        self.register_buffer("pix_T_cam", torch.zeros(0, 3, 3), persistent=False)
+        self.register_buffer("cam_T_world", torch.zeros(0, 4, 4), persistent=False)
+        self._calibrations: dict[str, CameraCalibration] = {}
+        self._matrices_key: tuple | None = None
+        if config.use_ofg:
+            self._calibrations = {key: config.calibration(key) for key in self.camera_keys}
         self.reset()
 
     def generate_model_card(self, *args, cfg=None, **kwargs) -> ModelCard:
@@ -66,24 +76,45 @@ class OmniDPolicy(PreTrainedPolicy):
     def camera_keys(self) -> list[str]:
         return list(self.config.image_features)
 
-    def camera_matrices(
-        self, batch_size: int, image_hw: tuple[int, int], device: torch.device
-    ) -> tuple[Tensor, Tensor]:
-        """Calibration of ``camera_keys`` from the config, for images of ``image_hw``, broadcast to the batch.
+    def set_calibration(self, calibrations: Mapping[str, CameraCalibration]) -> None:
+        """Replace the calibration of some cameras (keyed by image feature key), in the config too.
 
-        Returns:
-            pix_T_cam (B, S, 3, 3) and cam_T_world (B, S, 4, 4).
+        Use this, not ``config.camera_calibration``, on a policy that exists: its matrices are built from
+        the calibrations parsed here.
         """
-        Ks, Ts = [], []
-        for key in self.camera_keys:
-            calib = self.config.calibration(key)
-            Ks.append(
-                scale_intrinsics(torch.tensor(calib.K, dtype=torch.float32), calib.image_size, image_hw)
+        for key, calib in calibrations.items():
+            calib.validate(key)
+            self.config.camera_calibration[key] = calib.to_dict()
+        self._calibrations.update(calibrations)
+        self._matrices_key = None
+
+    def camera_matrices(self, batch_size: int, image_hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
+        """Calibration of ``camera_keys`` for the backbone's input, broadcast to the batch.
+
+        Args:
+            batch_size: B.
+            image_hw: (H, W) of the images given to the policy; the backbone sees ``config.resize_shape``
+                when it is set, else this size.
+        Returns:
+            pix_T_cam (B, S, 3, 3) for the backbone's input size and cam_T_world (B, S, 4, 4).
+        """
+        input_hw = tuple(self.config.resize_shape or image_hw)
+        key = (tuple(self.camera_keys), input_hw)
+        if key != self._matrices_key:
+            missing = [k for k in self.camera_keys if k not in self._calibrations]
+            if missing:
+                self.config.calibration(missing[0])  # raises the error that names the camera
+            pix_T_cam, cam_T_world = camera_matrices(
+                [self._calibrations[k] for k in self.camera_keys], [input_hw] * len(self.camera_keys)
             )
-            Ts.append(torch.tensor(calib.T_cam_world, dtype=torch.float32))
-        pix_T_cam = torch.stack(Ks).to(device).expand(batch_size, -1, -1, -1)
-        cam_T_world = torch.stack(Ts).to(device).expand(batch_size, -1, -1, -1)
-        return pix_T_cam, cam_T_world
+            device = self.pix_T_cam.device
+            self.pix_T_cam, self.cam_T_world = pix_T_cam.to(device), cam_T_world.to(device)
+            self._matrices_key = key
+        S = len(self.camera_keys)
+        return (
+            self.pix_T_cam.expand(batch_size, S, 3, 3),
+            self.cam_T_world.expand(batch_size, S, 4, 4),
+        )
 
     def _stack_inputs(self, batch: dict[str, Tensor], time_dim: bool) -> dict[str, Tensor]:
         """Validate the inputs and stack the cameras: images (B, [T,] S, 3, H, W), state (B, [T,] Ds)."""
@@ -117,10 +148,12 @@ class OmniDPolicy(PreTrainedPolicy):
 
     def _condition(self, stacked: dict[str, Tensor]) -> Tensor:
         images = stacked[OBS_IMAGES]
-        pix_T_cam, cam_T_world = self.camera_matrices(
-            images.shape[0], tuple(images.shape[-2:]), images.device
+        matrices = (
+            self.camera_matrices(images.shape[0], tuple(images.shape[-2:]))
+            if self.config.use_ofg
+            else (None, None)
         )
-        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world)
+        return self.model.global_condition(images, stacked[OBS_STATE], *matrices)
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], noise: Tensor | None = None) -> Tensor:
@@ -202,14 +235,15 @@ class OmniDModel(nn.Module):
         self.num_inference_steps = config.num_inference_steps or config.num_train_timesteps
 
     def encode_images(
-        self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
+        self, images: Tensor, pix_T_cam: Tensor | None, cam_T_world: Tensor | None
     ) -> tuple[Tensor, OFGOutput | None]:
         """Image condition of each observation step.
 
         Args:
             images: (B, T, S, 3, H, W) in [0, 1].
-            pix_T_cam: (B, S, 3, 3) intrinsics for (H, W) images, per sample and camera.
-            cam_T_world: (B, S, 4, 4) extrinsics per sample and camera.
+            pix_T_cam: (B, S, 3, 3) intrinsics per sample and camera for the backbone's input size
+                (``config.resize_shape``, else (H, W)); None without the OFG.
+            cam_T_world: (B, S, 4, 4) extrinsics per sample and camera; None without the OFG.
         Returns:
             (B, T, image_cond_dim) and, with the OFG, its output for the (B*T) flattened steps.
         """
@@ -220,7 +254,6 @@ class OmniDModel(nn.Module):
             x = F.interpolate(
                 x, size=self.config.resize_shape, mode="bilinear", align_corners=False, antialias=True
             )
-            pix_T_cam = scale_intrinsics(pix_T_cam, image_hw, tuple(self.config.resize_shape))
             image_hw = tuple(self.config.resize_shape)
         features = self.backbone(x)  # B*T*S, C, h, w
         if not self.config.use_ofg:
@@ -236,7 +269,7 @@ class OmniDModel(nn.Module):
         return out.condition.view(B, T, -1), out
 
     def global_condition(
-        self, images: Tensor, state: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
+        self, images: Tensor, state: Tensor, pix_T_cam: Tensor | None, cam_T_world: Tensor | None
     ) -> Tensor:
         """images (B, T, S, 3, H, W), state (B, T, Ds) -> (B, global_cond_dim)."""
         image_cond, _ = self.encode_images(images, pix_T_cam, cam_T_world)

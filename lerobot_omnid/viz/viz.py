@@ -30,9 +30,13 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, CalibrationError, CameraCalibration
+from lerobot_omnid.calibration.schema import (
+    CALIBRATION_INFO_KEY,
+    CalibrationError,
+    CameraCalibration,
+    camera_matrices,
+)
 from lerobot_omnid.cli import int_at_least
-from lerobot_omnid.geometry import scale_intrinsics
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX, camera_name, image_key
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.viz.drawing import FrameData, draw_frame, figure_rgb, frame_data, write_mp4
@@ -180,17 +184,10 @@ def resolve_calibrations(config: OmniDConfig, cameras: Sequence[str], source) ->
 
 
 def _differ(a: CameraCalibration, b: CameraCalibration) -> bool:
-    K_b = scale_intrinsics(torch.tensor(b.K, dtype=torch.float64), b.image_size, a.image_size)
     return not (
         np.allclose(a.T_cam_world, b.T_cam_world, atol=CALIBRATION_ATOL)
-        and np.allclose(a.K, K_b.numpy(), atol=CALIBRATION_ATOL)
+        and np.allclose(a.K, b.resized(a.image_size).K, atol=CALIBRATION_ATOL)
     )
-
-
-def camera_matrices(calibs: Sequence[CameraCalibration], hw: tuple[int, int]) -> tuple[torch.Tensor, ...]:
-    """pix_T_cam (S, 3, 3) for images of ``hw`` and cam_T_world (S, 4, 4)."""
-    Ks = [scale_intrinsics(torch.tensor(c.K, dtype=torch.float32), c.image_size, hw) for c in calibs]
-    return torch.stack(Ks), torch.tensor([c.T_cam_world for c in calibs], dtype=torch.float32)
 
 
 def _select_cameras(requested, policy_cams: list[str], available: Sequence[str], where: str) -> list[str]:
@@ -299,8 +296,10 @@ def visualize(
         )
         with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights from ..."
             policy = OmniDPolicy.from_pretrained(path, config=config)
-        pix_T_cam, cam_T_world = camera_matrices(calibs, image_hw)
-        device_ = next(policy.parameters()).device
+        # The displayed images' matrices (to draw the objects) and the backbone input's (to fuse): one
+        # function builds both, equal unless the checkpoint resizes its images.
+        pix_T_cam, cam_T_world = camera_matrices(calibs, [image_hw] * len(calibs))
+        input_pix_T_cam, input_cam_T_world = policy.camera_matrices(1, image_hw)
         shares, last = [], []  # attention shares of every frame drawn; the last FrameData
         name = "/".join([p for p in path.parts if p not in ("checkpoints", "pretrained_model")][-2:])
 
@@ -309,7 +308,7 @@ def visualize(
             x = torch.stack([torch.from_numpy(im).permute(2, 0, 1) for im in images.values()]).float() / 255
             with torch.no_grad():  # S, 3, H, W -> B=1, T=1, S, 3, H, W
                 _, ofg = policy.model.encode_images(
-                    x[None, None].to(device_), pix_T_cam[None].to(device_), cam_T_world[None].to(device_)
+                    x[None, None].to(input_pix_T_cam.device), input_pix_T_cam, input_cam_T_world
                 )
             title = f"{obs.label}   [checkpoint {name}]"
             data = frame_data(
