@@ -57,6 +57,17 @@ def validate_cameras(field_name: str, cameras: Any) -> list[str]:
     return list(cameras)
 
 
+def validate_blackout_cameras(blackout: Any, cameras: list[str]) -> list[str]:
+    """Check ``blackout_cameras``: a list (possibly empty) of distinct cameras among the observed ones."""
+    if isinstance(blackout, str) or not isinstance(blackout, list | tuple):
+        raise ValueError(f"blackout_cameras: expected a list of cameras from {cameras}, got {blackout!r}")
+    if len(set(blackout)) != len(blackout) or not set(blackout) <= set(cameras):
+        raise ValueError(
+            f"blackout_cameras: expected distinct cameras among the observed {cameras}, got {list(blackout)}"
+        )
+    return list(blackout)
+
+
 def validate_image_size(field_name: str, image_size: Any) -> int:
     """Check a square image side in pixels."""
     if (
@@ -84,10 +95,13 @@ class OmniDEnvConfig(EnvConfig):
         cameras: Fixed cameras whose images are observed, from ``cam_a`` ... ``cam_e``. Default: the
             training cameras B, C, D, E (camera A is the unseen view of the few-shot protocol).
             On the command line: ``--env.cameras='[cam_b,cam_c]'``.
-        layout: Object placement: ``"id"`` (the 10 cm x 10 cm square seen in training) or
-            ``"position_ood"`` (the band from 10 to 20 cm around it).
+        layout: Object placement: ``"id"`` (the 10 cm x 10 cm square seen in training),
+            ``"position_ood"`` (the band from 10 to 20 cm around it) or a graded band ``"position_band_1"``
+            ... ``"position_band_4"`` (0-2.5, 2.5-5, 5-7.5, 7.5-10 cm outside the square).
         background: Table texture: ``"id"`` or one of the unseen ``"ood1"`` ... ``"ood4"``.
         image_size: Side of the square camera images, pixels.
+        blackout_cameras: Observed cameras whose images are all black (zero pixels), for a control in which
+            only the state can drive the policy. Default: none. ``--env.blackout_cameras='[cam_b,cam_c]'``.
         episode_length: Time limit of an episode, env steps (at ``fps`` steps per second).
         fps: Control rate, steps per second; fixed by the env (10 Hz).
         render_mode: Gymnasium render mode; ``"rgb_array"`` gives ``lerobot-eval`` its videos (a mosaic
@@ -99,6 +113,7 @@ class OmniDEnvConfig(EnvConfig):
     layout: str = "id"
     background: str = "id"
     image_size: int = 128
+    blackout_cameras: list[str] = field(default_factory=list)
     episode_length: int = MAX_EPISODE_STEPS
     fps: int = CONTROL_FPS
     render_mode: str = "rgb_array"
@@ -111,6 +126,7 @@ class OmniDEnvConfig(EnvConfig):
         check_choice("layout", self.layout, LAYOUTS)
         check_choice("background", self.background, BACKGROUNDS)
         validate_image_size("image_size", self.image_size)
+        self.blackout_cameras = validate_blackout_cameras(self.blackout_cameras, self.cameras)
         check_positive_int("episode_length", self.episode_length)
         if self.fps != CONTROL_FPS:
             raise ValueError(
@@ -142,6 +158,7 @@ class OmniDEnvConfig(EnvConfig):
             "layout": self.layout,
             "background": self.background,
             "image_size": self.image_size,
+            "blackout_cameras": tuple(self.blackout_cameras),
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
         }

@@ -70,6 +70,7 @@ def test_features_for_camera_subset():
         "layout": "position_ood",
         "background": "ood2",
         "image_size": 64,
+        "blackout_cameras": (),
         "render_mode": "rgb_array",
         "max_episode_steps": 30,
     }
@@ -85,6 +86,9 @@ def test_features_for_camera_subset():
         ({"layout": "far"}, "layout", "'far'"),
         ({"background": "ood5"}, "background", "'ood5'"),
         ({"image_size": 0}, "image_size", "0"),
+        ({"blackout_cameras": ["cam_a"]}, "blackout_cameras", "['cam_a']"),
+        ({"blackout_cameras": ["cam_b", "cam_b"]}, "blackout_cameras", "['cam_b', 'cam_b']"),
+        ({"blackout_cameras": "cam_b"}, "blackout_cameras", "'cam_b'"),
         ({"episode_length": 0}, "episode_length", "0"),
         ({"fps": 30}, "fps", "30"),
         ({"render_mode": "human"}, "render_mode", "'human'"),
@@ -102,9 +106,11 @@ def test_cli_parsing_of_camera_list():
     class Cli:
         env: EnvConfig
 
-    cfg = draccus.parse(Cli, args=["--env.type=omnid", "--env.cameras=[cam_b,cam_c]", "--env.image_size=64"])
+    args = ["--env.type=omnid", "--env.cameras=[cam_b,cam_c]", "--env.image_size=64"]
+    cfg = draccus.parse(Cli, args=[*args, "--env.blackout_cameras=[cam_c]"])
     assert isinstance(cfg.env, OmniDEnvConfig)
-    assert cfg.env.cameras == ["cam_b", "cam_c"]
+    assert cfg.env.cameras == ["cam_b", "cam_c"] and cfg.env.blackout_cameras == ["cam_c"]
+    assert cfg.env.gym_kwargs["blackout_cameras"] == ("cam_c",)
     assert set(cfg.env.features) == {"action", "agent_pos", "pixels/cam_b", "pixels/cam_c"}
 
 

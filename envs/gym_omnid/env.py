@@ -102,6 +102,16 @@ def _cameras(value: Sequence[str]) -> tuple[str, ...]:
     return cams
 
 
+def _blackout_cameras(value: Sequence[str], cameras: tuple[str, ...]) -> tuple[str, ...]:
+    """Validate ``blackout_cameras``: distinct names among the observed ``cameras`` (possibly none)."""
+    blackout = (value,) if isinstance(value, str) else tuple(value)
+    if len(set(blackout)) != len(blackout) or not set(blackout) <= set(cameras):
+        raise ValueError(
+            f"blackout_cameras: expected distinct cameras among the observed {list(cameras)}, got {value!r}"
+        )
+    return blackout
+
+
 def _close_at_exit(env_ref: weakref.ref) -> None:
     """Close a still-open env before MuJoCo's own exit hook terminates the EGL display."""
     env = env_ref()
@@ -123,9 +133,13 @@ class OmniDEnv(gym.Env):
     Args:
         task: one of ``TASKS``.
         cameras: observed cameras, a non-empty subset of ``CAMERAS`` (order kept).
-        layout: ``"id"`` (key objects within +-5 cm of nominal) or ``"position_ood"`` (5-10 cm away).
+        layout: ``"id"`` (key objects within +-5 cm of nominal), ``"position_ood"`` (5-10 cm away) or a
+            graded band ``"position_band_1"`` .. ``"position_band_4"`` (0-2.5 ... 7.5-10 cm outside the ID
+            square, ``POSITION_BANDS``); distances in L-inf.
         background: table texture, ``"id"`` or ``"ood1"`` .. ``"ood4"``.
         image_size: int (square) or (height, width), pixels.
+        blackout_cameras: observed cameras whose observed pixels are all zero (black), for controls in which
+            only the state can drive a policy; ``render()`` still shows what they see. Default: none.
         render_mode: ``"rgb_array"`` (``render()`` returns a mosaic of the observed cameras) or None.
     """
 
@@ -139,12 +153,14 @@ class OmniDEnv(gym.Env):
         background: str = "id",
         image_size: int | tuple[int, int] = DEFAULT_IMAGE_SIZE,
         render_mode: str | None = "rgb_array",
+        blackout_cameras: Sequence[str] = (),
     ) -> None:
         self.task: str = _choice("task", task, TASKS)
         self.cameras: tuple[str, ...] = _cameras(cameras)
         self.layout: str = _choice("layout", layout, LAYOUTS)
         self.background: str = _choice("background", background, BACKGROUNDS)
         self.image_size: tuple[int, int] = _image_size(image_size)
+        self.blackout_cameras: tuple[str, ...] = _blackout_cameras(blackout_cameras, self.cameras)
         self.render_mode = _choice("render_mode", render_mode, (*RENDER_MODES, None))
         self.state_names: list[str] = list(STATE_NAMES)
         self.action_names: list[str] = list(ACTION_NAMES)
@@ -310,7 +326,8 @@ class OmniDEnv(gym.Env):
         return pixels
 
     def _observation(self) -> dict:
-        """Render the cameras and assemble ``{"pixels", "agent_pos"}`` in the ``state_names`` layout."""
+        """Render the cameras and assemble ``{"pixels", "agent_pos"}`` in the ``state_names`` layout (the
+        ``blackout_cameras`` black)."""
         self._last_pixels = self._render_cameras()
         tcp_xyz, world_R_tcp = self.tcp_pose()
         finger_gap = float(np.sum(self.data.qpos[self._finger_qpos]))
@@ -322,4 +339,8 @@ class OmniDEnv(gym.Env):
                 self.data.qpos[self._arm_qpos],
             ]
         ).astype(np.float32)
-        return {"pixels": dict(self._last_pixels), "agent_pos": state}
+        pixels = {
+            cam: np.zeros_like(image) if cam in self.blackout_cameras else image
+            for cam, image in self._last_pixels.items()
+        }
+        return {"pixels": pixels, "agent_pos": state}

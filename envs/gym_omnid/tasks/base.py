@@ -1,4 +1,4 @@
-"""Task interface and the shared layout sampler (ID square / position-OOD band, collision-free)."""
+"""Task interface and the shared layout sampler (ID square, position-OOD and graded bands; collision-free)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,13 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from gym_omnid.constants import ID_HALF_EXTENT, LAYOUT_MAX_TRIES, OOD_HALF_EXTENT, REST_SPEED
+from gym_omnid.constants import (
+    ID_HALF_EXTENT,
+    LAYOUT_MAX_TRIES,
+    OOD_HALF_EXTENT,
+    POSITION_BANDS,
+    REST_SPEED,
+)
 from gym_omnid.robot import FINGER_GEOMS, HAND_GEOM
 from gym_omnid.waypoints import Waypoint
 
@@ -31,14 +37,27 @@ class Placement:
     key: bool = True
 
 
+def offset_band(layout: str) -> tuple[float, float]:
+    """(inner, outer) half extents (m) of the L-inf band ``inner < |offset|_inf <= outer`` in which the key
+    objects of an out-of-distribution ``layout`` are placed: ``"position_ood"`` from the ID square out to
+    ``OOD_HALF_EXTENT``, ``"position_band_k"`` at the distance outside the ID square of ``POSITION_BANDS``."""
+    if layout == "position_ood":
+        return ID_HALF_EXTENT, OOD_HALF_EXTENT
+    if layout not in POSITION_BANDS:
+        raise ValueError(f"layout: expected position_ood or one of {list(POSITION_BANDS)}, got {layout!r}")
+    low, high = POSITION_BANDS[layout]
+    return ID_HALF_EXTENT + low, ID_HALF_EXTENT + high
+
+
 def sample_offset(rng: np.random.Generator, layout: str) -> np.ndarray:
-    """(2,) planar offset (m): ``"id"`` uniform in the 10 cm square; ``"position_ood"`` uniform in the
-    band ``ID_HALF_EXTENT < |offset|_inf <= OOD_HALF_EXTENT`` around it."""
+    """(2,) planar offset (m): ``"id"`` uniform in the 10 cm square; any other layout uniform in its band
+    ``inner < |offset|_inf <= outer`` around it (:func:`offset_band`), by rejection from the outer square."""
     if layout == "id":
         return rng.uniform(-ID_HALF_EXTENT, ID_HALF_EXTENT, size=2)
+    inner, outer = offset_band(layout)
     while True:
-        offset = rng.uniform(-OOD_HALF_EXTENT, OOD_HALF_EXTENT, size=2)
-        if np.max(np.abs(offset)) > ID_HALF_EXTENT:
+        offset = rng.uniform(-outer, outer, size=2)
+        if np.max(np.abs(offset)) > inner:
             return offset
 
 

@@ -1,0 +1,87 @@
+"""Statistics of success counts, for the benchmark's report: pure functions of integers, no dependencies.
+
+- :func:`wilson_interval`: the Wilson score interval of a success rate (k successes in n episodes);
+- :func:`fisher_exact`: the two-sided p-value of Fisher's exact test of a 2x2 table (two success rates);
+- :func:`rate_difference`: the difference of two success rates with Newcombe's hybrid score interval
+  (method 10 of Newcombe 1998, built from the two Wilson intervals).
+
+Rates are fractions in [0, 1]; the report prints them as percentages.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+Z_95 = 1.959963984540054
+"""Standard normal quantile of 0.975: two-sided 95 % intervals."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A rate or a difference of rates with its interval: ``low <= value <= high``, fractions."""
+
+    value: float
+    low: float
+    high: float
+
+
+def _check_counts(successes: int, n: int, which: str = "") -> None:
+    """Counts must be ints with ``0 <= successes <= n`` and ``n >= 1``; errors name the argument."""
+    for name, value in ((f"n{which}", n), (f"successes{which}", successes)):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise TypeError(f"{name}: expected an int, got {value!r}")
+    if n < 1:
+        raise ValueError(f"n{which}: expected at least 1 episode, got {n}")
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes{which}: expected an int in [0, n{which}={n}], got {successes}")
+
+
+def wilson_interval(successes: int, n: int, z: float = Z_95) -> Estimate:
+    """The rate ``successes / n`` with its Wilson score interval (Wilson 1927; 95 % for the default ``z``).
+
+    Unlike the normal approximation it stays inside [0, 1] and is not empty at 0 or n successes:
+    0 of 10 gives [0, 0.278], 7 of 10 gives [0.397, 0.892].
+    """
+    _check_counts(successes, n)
+    rate = successes / n
+    z2 = z * z
+    centre = (rate + z2 / (2 * n)) / (1 + z2 / n)
+    half = z / (1 + z2 / n) * math.sqrt(rate * (1 - rate) / n + z2 / (4 * n * n))
+    low = 0.0 if successes == 0 else centre - half  # exact ends where round-off would miss them
+    high = 1.0 if successes == n else centre + half
+    return Estimate(rate, low, high)
+
+
+def fisher_exact(successes_1: int, n_1: int, successes_2: int, n_2: int) -> float:
+    """Two-sided p-value of Fisher's exact test that two success rates are equal.
+
+    The 2x2 table is ``[[successes_1, n_1 - successes_1], [successes_2, n_2 - successes_2]]``. Given its
+    margins, the first cell is hypergeometric; the p-value sums the probabilities of every table at most as
+    probable as the observed one (the usual two-sided rule, as R's ``fisher.test`` and SciPy's
+    ``fisher_exact``). Computed exactly with integer binomial coefficients.
+    """
+    _check_counts(successes_1, n_1, "_1")
+    _check_counts(successes_2, n_2, "_2")
+    row, column, total = n_1, successes_1 + successes_2, n_1 + n_2
+
+    # Table with x successes in row 1: its probability is weight(x) / comb(total, row).
+    def weight(x: int) -> int:
+        return math.comb(column, x) * math.comb(total - column, row - x)
+
+    observed = weight(successes_1)
+    tables = range(max(0, row + column - total), min(row, column) + 1)
+    return sum(w for w in map(weight, tables) if w <= observed) / math.comb(total, row)
+
+
+def rate_difference(successes_1: int, n_1: int, successes_2: int, n_2: int, z: float = Z_95) -> Estimate:
+    """``rate_1 - rate_2`` with Newcombe's hybrid score interval (Newcombe 1998, method 10): the distances
+    of each rate to the ends of its Wilson interval, combined in quadrature. 56/70 - 48/80 = 0.2 gives
+    [0.0524, 0.3339] (Newcombe's example)."""
+    _check_counts(successes_1, n_1, "_1")
+    _check_counts(successes_2, n_2, "_2")
+    first, second = wilson_interval(successes_1, n_1, z), wilson_interval(successes_2, n_2, z)
+    difference = first.value - second.value
+    low = difference - math.hypot(first.value - first.low, second.high - second.value)
+    high = difference + math.hypot(first.high - first.value, second.value - second.low)
+    return Estimate(difference, low, high)

@@ -1,0 +1,95 @@
+"""lerobot_omnid.benchmark.stats against published values (SciPy is not installed here, so the sources are
+cited) and against the definitions."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from lerobot_omnid.benchmark.stats import Z_95, fisher_exact, rate_difference, wilson_interval
+
+
+@pytest.mark.parametrize(
+    ("successes", "n", "low", "high"),
+    [
+        # Newcombe 1998 (Stat. Med. 17: 857-872), Table I, method 3 (score interval without correction)
+        (81, 263, 0.2553, 0.3662),
+        (15, 148, 0.0624, 0.1605),
+        (0, 20, 0.0, 0.1611),
+        (1, 29, 0.0061, 0.1718),
+        (7, 10, 0.3968, 0.8922),  # docs/results.md's 7/10: 39.7-89.2 %
+        (0, 10, 0.0, 0.2775),  # docs/results.md's 0/10: 0-27.8 %
+        (10, 10, 0.7225, 1.0),
+    ],
+)
+def test_wilson_interval_known_values(successes, n, low, high):
+    estimate = wilson_interval(successes, n)
+    assert estimate.value == successes / n
+    assert estimate.low == pytest.approx(low, abs=1e-4) and estimate.high == pytest.approx(high, abs=1e-4)
+
+
+def test_wilson_interval_solves_the_score_equation():
+    """Each end p of the interval satisfies |k/n - p| = z sqrt(p (1 - p) / n) (the definition)."""
+    for successes, n in ((3, 17), (12, 40), (49, 50)):
+        estimate = wilson_interval(successes, n)
+        for p in (estimate.low, estimate.high):
+            assert abs(successes / n - p) == pytest.approx(Z_95 * math.sqrt(p * (1 - p) / n), rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("table", "p_value"),
+    [
+        (((3, 4), (1, 4)), 0.4857),  # Fisher's tea tasting [[3, 1], [1, 3]]: R's fisher.test(TeaTasting)
+        (((12, 40), (0, 40)), 0.0001855),  # 12/40 vs 0/40: the p = 0.0002 of docs/results.md
+        (((7, 10), (0, 10)), 0.003096),  # 7/10 vs 0/10 blind: 2 * comb(13, 3) / comb(20, 10), p = 0.003
+        (((7, 10), (5, 10)), 0.6499),  # 70 % vs 50 % of 10 each: the p = 0.65 of issue 18
+        (((0, 5), (0, 5)), 1.0),
+    ],
+)
+def test_fisher_exact_known_values(table, p_value):
+    (k1, n1), (k2, n2) = table
+    assert fisher_exact(k1, n1, k2, n2) == pytest.approx(p_value, rel=1e-3)
+    assert fisher_exact(k2, n2, k1, n1) == pytest.approx(p_value, rel=1e-3)  # symmetric in the rows
+
+
+def test_fisher_exact_matches_the_hypergeometric_definition():
+    """p = sum of hypergeometric probabilities of the tables no more probable than the observed one."""
+    k1, n1, k2, n2 = 4, 9, 8, 11
+    column, total = k1 + k2, n1 + n2
+    probabilities = {
+        x: math.comb(column, x) * math.comb(total - column, n1 - x) / math.comb(total, n1)
+        for x in range(max(0, n1 + column - total), min(n1, column) + 1)
+    }
+    assert sum(probabilities.values()) == pytest.approx(1.0)
+    expected = sum(p for p in probabilities.values() if p <= probabilities[k1] * (1 + 1e-9))
+    assert fisher_exact(k1, n1, k2, n2) == pytest.approx(expected, rel=1e-12)
+
+
+def test_rate_difference_newcombe_examples():
+    """Newcombe 1998 (Stat. Med. 17: 873-890), Table II, method 10 (hybrid score, no correction)."""
+    for (k1, n1, k2, n2), (low, high) in {
+        (56, 70, 48, 80): (0.0524, 0.3339),
+        (9, 10, 3, 10): (0.1705, 0.8090),
+        (5, 56, 0, 29): (-0.0381, 0.1926),
+        (0, 10, 0, 20): (-0.1611, 0.2775),
+        (10, 10, 0, 20): (0.6791, 1.0),
+    }.items():
+        estimate = rate_difference(k1, n1, k2, n2)
+        assert estimate.value == pytest.approx(k1 / n1 - k2 / n2)
+        assert estimate.low == pytest.approx(low, abs=1e-4) and estimate.high == pytest.approx(high, abs=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: wilson_interval(11, 10), r"successes: expected an int in \[0, n=10\], got 11"),
+        (lambda: wilson_interval(0, 0), "n: expected at least 1 episode, got 0"),
+        (lambda: wilson_interval(2.0, 10), "successes: expected an int, got 2.0"),
+        (lambda: fisher_exact(1, 4, -1, 4), r"successes_2: expected an int in \[0, n_2=4\], got -1"),
+        (lambda: rate_difference(1, 4, 1, 0), "n_2: expected at least 1 episode, got 0"),
+    ],
+)
+def test_bad_counts_are_named(call, message):
+    with pytest.raises((ValueError, TypeError), match=message):
+        call()
