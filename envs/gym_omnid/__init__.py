@@ -1,7 +1,8 @@
 """Multi-view MuJoCo benchmark envs for OmniD (gymnasium + mujoco + numpy only).
 
 Importing this package registers ``gym_omnid/<task>`` for every task in ``TASKS``; variants are
-constructor kwargs (``cameras``, ``layout``, ``background``, ``image_size``)::
+constructor kwargs (``cameras``, ``layout``, ``background``, ``image_size``, ``rig``,
+``per_frame_calibration``)::
 
     env = gymnasium.make("gym_omnid/select_apple", layout="position_ood", background="ood2")
 
@@ -18,16 +19,20 @@ from gymnasium.envs.registration import register
 from gym_omnid.constants import (
     ACTION_DIM,
     ACTION_NAMES,
+    ALL_CAMERAS,
     BACKGROUNDS,
     CAMERAS,
     CONTROL_FPS,
+    DEFAULT_RIG,
     LAYOUTS,
     MAX_EPISODE_STEPS,
+    RIGS,
     STATE_DIM,
     STATE_NAMES,
     TASKS,
     TRAIN_CAMERAS,
     WORKSPACE_BOUNDS,
+    WRIST_CAMERA,
 )
 
 for _task in TASKS:
@@ -41,14 +46,18 @@ for _task in TASKS:
 __all__ = [
     "ACTION_DIM",
     "ACTION_NAMES",
+    "ALL_CAMERAS",
     "BACKGROUNDS",
     "CAMERAS",
     "CONTROL_FPS",
+    "DEFAULT_RIG",
     "LAYOUTS",
     "MAX_EPISODE_STEPS",
+    "RIGS",
     "STATE_DIM",
     "STATE_NAMES",
     "TASKS",
     "TRAIN_CAMERAS",
     "WORKSPACE_BOUNDS",
+    "WRIST_CAMERA",
 ]

@@ -18,6 +18,36 @@ import numpy as np
 # Rotation taking OpenCV camera coordinates to MuJoCo camera coordinates (flip y and z).
 MJCAM_R_CVCAM = np.diag([1.0, -1.0, -1.0])
 DEPTH_EPS = 1e-9  # m: smallest depth accepted in a perspective divide
+# Observation keys of the per-frame calibration (env option ``per_frame_calibration``), one pair per
+# observed camera: ``f"{EXTRINSICS_OBS_PREFIX}{cam}"`` is ``T_cam_world`` row-major (16,) and
+# ``f"{INTRINSICS_OBS_PREFIX}{cam}"`` is ``K`` row-major (9,), float32. LeRobot's ``preprocess_observation``
+# passes them on as ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``, the names of
+# the dataset columns ``omnid-record --per-frame-calibration`` writes.
+EXTRINSICS_OBS_PREFIX = "extrinsics."
+INTRINSICS_OBS_PREFIX = "intrinsics."
+
+
+def look_at_xyaxes(
+    position: tuple[float, float, float],
+    target: tuple[float, float, float],
+    roll_deg: float = 0.0,
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0),
+) -> np.ndarray:
+    """MuJoCo ``xyaxes`` (6,) of a camera at ``position`` looking at ``target``, in the parent's frame.
+
+    MuJoCo cameras look along their -z axis, x right and y up. With ``roll_deg = 0`` the image's up is
+    as close to ``up`` as the viewing direction allows; ``roll_deg`` then turns the camera about its
+    viewing axis (positive: its x axis towards its y axis, so the scene turns clockwise in the image).
+    """
+    z_axis = np.asarray(position, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    z_axis /= np.linalg.norm(z_axis)
+    x_axis = np.cross(np.asarray(up, dtype=np.float64), z_axis)
+    x_axis /= np.linalg.norm(x_axis)
+    y_axis = np.cross(z_axis, x_axis)
+    roll = math.radians(roll_deg)
+    x_rolled = math.cos(roll) * x_axis + math.sin(roll) * y_axis
+    y_rolled = -math.sin(roll) * x_axis + math.cos(roll) * y_axis
+    return np.concatenate([x_rolled, y_rolled])
 
 
 def intrinsics_from_fovy(fovy_deg: float, height: int, width: int) -> np.ndarray:
@@ -105,4 +135,12 @@ def mujoco_camera_calibration(
         "K": intrinsics_from_fovy(fovy_deg, height, width),
         "T_cam_world": cam_T_world_from_mujoco(cam_xpos, cam_xmat),
         "image_size": (int(height), int(width)),
+    }
+
+
+def calibration_observation(cam: str, calib: dict) -> dict[str, np.ndarray]:
+    """The per-frame calibration observation entries of camera ``cam`` (see ``EXTRINSICS_OBS_PREFIX``)."""
+    return {
+        f"{EXTRINSICS_OBS_PREFIX}{cam}": calib["T_cam_world"].astype(np.float32).reshape(16),
+        f"{INTRINSICS_OBS_PREFIX}{cam}": calib["K"].astype(np.float32).reshape(9),
     }

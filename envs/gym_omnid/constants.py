@@ -51,6 +51,11 @@ WORKSPACE_BOUNDS = ((0.2, 0.84), (-0.4, 0.4), (0.0, 0.32))
 
 # --- rendering ---------------------------------------------------------------------------------------
 CAMERA_FOVY = 50.0  # deg: vertical field of view of every fixed camera
+WRIST_CAMERA = "cam_wrist"  # on the gripper, looking along it at the fingers; moves with the arm
+WRIST_CAMERA_FOVY = 60.0  # deg: vertical field of view of the wrist camera
+ALL_CAMERAS = (*CAMERAS, WRIST_CAMERA)  # every camera an env can observe; the default is CAMERAS
+RIGS = ("default", "closer", "higher", "bumped")  # placements of the fixed cameras (gym_omnid.rigs)
+DEFAULT_RIG = "default"  # the benchmark's placements
 TABLE_TEXTURE_SIZE = 128  # px: side of the square table-top texture (about 1 cm per texel)
 RENDER_MOSAIC_COLUMNS = 3  # images per row in render()'s mosaic of the observed cameras
 # Tessellation of spheres, capsules and cylinders (MuJoCo's defaults are 28 / 16 / 4): halves the

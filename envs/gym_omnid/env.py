@@ -12,24 +12,27 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
-from gym_omnid.calibration import mujoco_camera_calibration
+from gym_omnid.calibration import calibration_observation, mujoco_camera_calibration
 from gym_omnid.constants import (
     ACTION_DIM,
     ACTION_NAMES,
     ACTION_POS_HIGH,
     ACTION_POS_LOW,
+    ALL_CAMERAS,
     ARM_JOINT_RANGES,
     ARM_JOINTS,
     BACKGROUNDS,
     CAMERAS,
     CONTROL_FPS,
     DEFAULT_IMAGE_SIZE,
+    DEFAULT_RIG,
     FINGER_TRAVEL,
     HOME_JOINTS,
     LAYOUTS,
     MAX_IMAGE_SIDE,
     N_SUBSTEPS,
     RENDER_MOSAIC_COLUMNS,
+    RIGS,
     SETTLE_STEPS,
     STATE_DIM,
     STATE_GRIPPER_RANGE,
@@ -41,6 +44,7 @@ from gym_omnid.constants import (
     TASKS,
 )
 from gym_omnid.ik import DampedLeastSquaresIK
+from gym_omnid.rigs import RIG_PLACEMENTS
 from gym_omnid.robot import FINGER_JOINTS, TCP_SITE
 from gym_omnid.rotations import matrix_from_rot6d, rot6d_from_matrix
 from gym_omnid.scene import TABLE_TEXTURE, build_mjcf
@@ -93,11 +97,11 @@ def _state_bounds() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _cameras(value: Sequence[str]) -> tuple[str, ...]:
-    """Validate ``cameras`` (a name or a sequence of distinct names from ``CAMERAS``), order kept."""
+    """Validate ``cameras`` (a name or a sequence of distinct names from ``ALL_CAMERAS``), order kept."""
     cams = (value,) if isinstance(value, str) else tuple(value)
-    if not cams or len(set(cams)) != len(cams) or not set(cams) <= set(CAMERAS):
+    if not cams or len(set(cams)) != len(cams) or not set(cams) <= set(ALL_CAMERAS):
         raise ValueError(
-            f"cameras: expected a non-empty subset of {list(CAMERAS)} without repeats, got {value!r}"
+            f"cameras: expected a non-empty subset of {list(ALL_CAMERAS)} without repeats, got {value!r}"
         )
     return cams
 
@@ -120,11 +124,14 @@ def _close_at_exit(env_ref: weakref.ref) -> None:
 
 
 class OmniDEnv(gym.Env):
-    """Multi-view tabletop manipulation with a 6-DoF arm, five fixed cameras and scripted experts.
+    """Multi-view tabletop manipulation with a 6-DoF arm, five fixed cameras, a wrist camera and
+    scripted experts.
 
     Observation: ``{"pixels": {cam: (H, W, 3) uint8}, "agent_pos": (STATE_DIM,) float32}`` with the
     state layout of ``state_names`` (TCP position m, TCP 6D orientation, gripper closure in [0, 1],
-    arm joint positions rad).
+    arm joint positions rad). With ``per_frame_calibration`` also, for every observed camera,
+    ``"extrinsics.<cam>"`` (16,) and ``"intrinsics.<cam>"`` (9,) float32: ``T_cam_world`` and ``K`` of
+    that frame, row-major (``camera_calibration(cam)`` when the images were rendered).
     Action: ``(ACTION_DIM,) float32``, an absolute TCP target in the world frame: position (m), 6D
     orientation (first two columns of ``world_R_tcp``), gripper command in [0, 1] (0 open, 1 closed);
     applied through damped-least-squares IK to the joint-position actuators, then
@@ -132,7 +139,8 @@ class OmniDEnv(gym.Env):
 
     Args:
         task: one of ``TASKS``.
-        cameras: observed cameras, a non-empty subset of ``CAMERAS`` (order kept).
+        cameras: observed cameras, a non-empty subset of ``ALL_CAMERAS`` (order kept): the five fixed
+            ``CAMERAS`` (the default) and ``WRIST_CAMERA`` (``cam_wrist``, on the gripper).
         layout: ``"id"`` (key objects within +-5 cm of nominal), ``"position_ood"`` (5-10 cm away) or a
             graded band ``"position_band_1"`` .. ``"position_band_4"`` (0-2.5 ... 7.5-10 cm outside the ID
             square, ``POSITION_BANDS``); distances in L-inf.
@@ -140,6 +148,8 @@ class OmniDEnv(gym.Env):
         image_size: int (square) or (height, width), pixels.
         blackout_cameras: observed cameras whose observed pixels are all zero (black), for controls in which
             only the state can drive a policy; ``render()`` still shows what they see. Default: none.
+        rig: placements of the fixed cameras, one of ``RIGS`` (see :mod:`gym_omnid.rigs`).
+        per_frame_calibration: add each observed camera's calibration to every observation.
         render_mode: ``"rgb_array"`` (``render()`` returns a mosaic of the observed cameras) or None.
     """
 
@@ -152,6 +162,8 @@ class OmniDEnv(gym.Env):
         layout: str = "id",
         background: str = "id",
         image_size: int | tuple[int, int] = DEFAULT_IMAGE_SIZE,
+        rig: str = DEFAULT_RIG,
+        per_frame_calibration: bool = False,
         render_mode: str | None = "rgb_array",
         blackout_cameras: Sequence[str] = (),
     ) -> None:
@@ -161,12 +173,17 @@ class OmniDEnv(gym.Env):
         self.background: str = _choice("background", background, BACKGROUNDS)
         self.image_size: tuple[int, int] = _image_size(image_size)
         self.blackout_cameras: tuple[str, ...] = _blackout_cameras(blackout_cameras, self.cameras)
+        self.rig: str = _choice("rig", rig, RIGS)
+        if not isinstance(per_frame_calibration, bool):
+            raise ValueError(f"per_frame_calibration: expected True or False, got {per_frame_calibration!r}")
+        self.per_frame_calibration = per_frame_calibration
         self.render_mode = _choice("render_mode", render_mode, (*RENDER_MODES, None))
         self.state_names: list[str] = list(STATE_NAMES)
         self.action_names: list[str] = list(ACTION_NAMES)
 
         self._task = make_task(task)
-        self.model = mujoco.MjModel.from_xml_string(build_mjcf(self._task, self.image_size))
+        mjcf = build_mjcf(self._task, self.image_size, RIG_PLACEMENTS[self.rig])
+        self.model = mujoco.MjModel.from_xml_string(mjcf)
         self.data = mujoco.MjData(self.model)
         self._task.bind(self.model)
         self._ik = DampedLeastSquaresIK(self.model, TCP_SITE, ARM_JOINTS)
@@ -181,15 +198,18 @@ class OmniDEnv(gym.Env):
         self.set_background(self.background)
 
         height, width = self.image_size
-        self.observation_space = spaces.Dict(
-            {
-                # A sequence of pairs keeps the cameras in the requested order (a dict would be sorted).
-                "pixels": spaces.Dict(
-                    [(cam, spaces.Box(0, 255, (height, width, 3), dtype=np.uint8)) for cam in self.cameras]
-                ),
-                "agent_pos": spaces.Box(*_state_bounds(), (STATE_DIM,), dtype=np.float32),
-            }
-        )
+        obs_spaces = {
+            # A sequence of pairs keeps the cameras in the requested order (a dict would be sorted).
+            "pixels": spaces.Dict(
+                [(cam, spaces.Box(0, 255, (height, width, 3), dtype=np.uint8)) for cam in self.cameras]
+            ),
+            "agent_pos": spaces.Box(*_state_bounds(), (STATE_DIM,), dtype=np.float32),
+        }
+        if self.per_frame_calibration:
+            for cam in self.cameras:
+                for key, value in calibration_observation(cam, self.camera_calibration(cam)).items():
+                    obs_spaces[key] = spaces.Box(-np.inf, np.inf, value.shape, dtype=np.float32)
+        self.observation_space = spaces.Dict(obs_spaces)
         low = np.array([*ACTION_POS_LOW, *([-1.0] * 6), 0.0], dtype=np.float32)
         high = np.array([*ACTION_POS_HIGH, *([1.0] * 6), 1.0], dtype=np.float32)
         self.action_space = spaces.Box(low, high, (ACTION_DIM,), dtype=np.float32)
@@ -251,13 +271,15 @@ class OmniDEnv(gym.Env):
         return self._task.description
 
     def camera_calibration(self, cam: str) -> dict:
-        """OpenCV calibration of camera ``cam`` for this env's image size.
+        """OpenCV calibration of camera ``cam`` (one of ``ALL_CAMERAS``) for this env's image size, now.
 
+        The fixed cameras' never changes; the wrist camera's follows the arm: after ``reset`` or ``step``
+        it is the one of the images just observed (MuJoCo's camera poses are those the renderer used).
         Returns ``{"K": (3, 3) float64, "T_cam_world": (4, 4) float64, "image_size": (height, width)}``
         where ``uv = K @ (T_cam_world @ X)[:3]`` divided by its third component, pixel centres at
         integer coordinates (see :mod:`gym_omnid.calibration`).
         """
-        _choice("cam", cam, CAMERAS)
+        _choice("cam", cam, ALL_CAMERAS)
         cam_id = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_CAMERA, cam)
         return mujoco_camera_calibration(
             float(self.model.cam_fovy[cam_id]),
@@ -327,7 +349,7 @@ class OmniDEnv(gym.Env):
 
     def _observation(self) -> dict:
         """Render the cameras and assemble ``{"pixels", "agent_pos"}`` in the ``state_names`` layout (the
-        ``blackout_cameras`` black)."""
+        ``blackout_cameras`` black), with the cameras' calibration entries when ``per_frame_calibration``."""
         self._last_pixels = self._render_cameras()
         tcp_xyz, world_R_tcp = self.tcp_pose()
         finger_gap = float(np.sum(self.data.qpos[self._finger_qpos]))
@@ -343,4 +365,8 @@ class OmniDEnv(gym.Env):
             cam: np.zeros_like(image) if cam in self.blackout_cameras else image
             for cam, image in self._last_pixels.items()
         }
-        return {"pixels": pixels, "agent_pos": state}
+        obs = {"pixels": pixels, "agent_pos": state}
+        if self.per_frame_calibration:
+            for cam in self.cameras:
+                obs.update(calibration_observation(cam, self.camera_calibration(cam)))
+        return obs

@@ -7,12 +7,18 @@ at the wrist centre ``FOREARM_LENGTH`` above the elbow. The tool centre point (s
 ``WRIST_TO_TCP`` beyond the wrist centre, between the finger pads; its z axis is the approach
 direction and its x axis the finger closing direction.
 
+The wrist camera ``cam_wrist`` is fixed to the hand (body ``link6``) beside the wrist, looking along
+the approach direction, so that the fingertips sit at the bottom of its image and the space between
+and beyond them fills the rest. It is a camera only, with no housing geom: the arm's
+dynamics and the fixed cameras' images are those of the arm without it.
+
 Only the hand and the fingers collide (with objects, fixtures and the table); the links are visual,
 which keeps the scripted experts free of arm-object collisions they cannot see.
 """
 
 from __future__ import annotations
 
+from gym_omnid.calibration import look_at_xyaxes
 from gym_omnid.constants import (
     ARM_DAMPING,
     ARM_FORCE_LIMIT,
@@ -26,6 +32,8 @@ from gym_omnid.constants import (
     FOREARM_LENGTH,
     SHOULDER_HEIGHT,
     UPPER_ARM_LENGTH,
+    WRIST_CAMERA,
+    WRIST_CAMERA_FOVY,
     WRIST_TO_TCP,
 )
 
@@ -45,6 +53,13 @@ FINGER_LIMIT_SOLREF = "0.004 1"  # stiff travel limits (time constant = 2 physic
 ARM_ARMATURE = 0.05  # kg m^2: rotor inertia added to each arm joint
 FINGER_ARMATURE = 0.01  # kg
 ARM_DENSITY = 400.0  # kg / m^3 of the link primitives
+# Wrist camera mount in the hand frame (link6: origin at the wrist centre, z along the approach, x along
+# the fingers' travel), metres: 8 cm beside the wrist centre, its optical axis parallel to the approach
+# direction (a target straight ahead); the image's up is the hand's +y, away from the fingers. Nothing
+# of the arm lies within MuJoCo's near clipping distance (0.11 m here) inside its field of view.
+WRIST_CAMERA_POS = (0.0, 0.08, 0.0)
+WRIST_CAMERA_TARGET = (0.0, 0.08, 1.0)
+WRIST_CAMERA_UP = (0.0, 1.0, 0.0)
 
 
 def _hinge(index: int, axis: str) -> str:
@@ -66,6 +81,18 @@ def _finger(side: str, sign: int, root_z: float) -> str:
                 pos="{sign * hx:.4f} 0 {hz:.4f}" mass="{FINGER_MASS}" rgba="0.2 0.2 0.22 1"
                 friction="{FINGER_FRICTION} 0.02 0.002" condim="4"/>
         </body>"""
+
+
+def _wrist_camera() -> str:
+    """``<camera>`` tag of the wrist camera, in the hand's frame."""
+    xyaxes = " ".join(
+        f"{v:.6f}" for v in look_at_xyaxes(WRIST_CAMERA_POS, WRIST_CAMERA_TARGET, up=WRIST_CAMERA_UP)
+    )
+    pos = " ".join(f"{v}" for v in WRIST_CAMERA_POS)
+    return (
+        f'<camera name="{WRIST_CAMERA}" mode="fixed" pos="{pos}" xyaxes="{xyaxes}" '
+        f'fovy="{WRIST_CAMERA_FOVY}"/>'
+    )
 
 
 def arm_worldbody() -> str:
@@ -105,6 +132,7 @@ def arm_worldbody() -> str:
                         rgba="0.25 0.25 0.28 1"/>
                   <site name="{TCP_SITE}" pos="0 0 {WRIST_TO_TCP}" euler="0 0 3.14159265" size="0.005"
                         rgba="1 0 1 0"/>
+                  {_wrist_camera()}
                   {_finger("left", 1, finger_root)}
                   {_finger("right", -1, finger_root)}
                 </body>

@@ -1,15 +1,19 @@
 """The MJCF scene built in code: floor, table with a swappable texture, the arm, five cameras, a task.
 
+The five fixed cameras are placed by a rig (:mod:`gym_omnid.rigs`); the wrist camera is part of the
+arm (:mod:`gym_omnid.robot`).
+
 Rendering cost is kept low on purpose: primitives only, no shadows, no multisampling, and an offscreen
 buffer exactly the size of the observation images.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from types import MappingProxyType
+from typing import NamedTuple
 
-import numpy as np
-
+from gym_omnid.calibration import look_at_xyaxes
 from gym_omnid.constants import (
     CAMERA_FOVY,
     CAMERAS,
@@ -31,8 +35,9 @@ TABLE_LEG_HALF = 0.03  # m: half side of a table leg
 ROOM_HALF = 2.5  # m: half side of the room around the table
 WALL_HEIGHT = 3.0  # m: wall height above the floor
 WALL_THICKNESS = 0.05  # m: half thickness of the floor and wall boxes
-# Camera placements: (position, point looked at), world frame, metres. B-E look at the workspace from
-# the front, both sides and over the robot's shoulder at similar heights; A is a steep top view.
+# Camera placements of the default rig: (position, point looked at), world frame, metres. B-E look at
+# the workspace from the front, both sides and over the robot's shoulder at similar heights; A is a
+# steep top view.
 CAMERA_POSES = MappingProxyType(
     {
         "cam_a": ((0.30, -0.28, 1.18), (0.55, 0.0, 0.0)),
@@ -44,24 +49,25 @@ CAMERA_POSES = MappingProxyType(
 )
 
 
-def look_at_xyaxes(position: tuple[float, float, float], target: tuple[float, float, float]) -> np.ndarray:
-    """MuJoCo ``xyaxes`` (6,) of a camera at ``position`` looking at ``target`` with world z up.
+class CameraPlacement(NamedTuple):
+    """Where a fixed camera stands and what it looks at, world frame.
 
-    MuJoCo cameras look along their -z axis, x right and y up.
+    Args:
+        position: camera centre (x, y, z), metres.
+        target: a point on its optical axis, metres.
+        roll_deg: turn about the optical axis from the upright view, degrees (see ``look_at_xyaxes``).
     """
-    z_axis = np.asarray(position, dtype=np.float64) - np.asarray(target, dtype=np.float64)
-    z_axis /= np.linalg.norm(z_axis)
-    x_axis = np.cross([0.0, 0.0, 1.0], z_axis)
-    x_axis /= np.linalg.norm(x_axis)
-    y_axis = np.cross(z_axis, x_axis)
-    return np.concatenate([x_axis, y_axis])
+
+    position: tuple[float, float, float]
+    target: tuple[float, float, float]
+    roll_deg: float = 0.0
 
 
-def _cameras() -> str:
+def _cameras(placements: Mapping[str, CameraPlacement]) -> str:
     lines = []
     for name in CAMERAS:
-        position, target = CAMERA_POSES[name]
-        xyaxes = " ".join(f"{v:.6f}" for v in look_at_xyaxes(position, target))
+        position, target, roll_deg = placements[name]
+        xyaxes = " ".join(f"{v:.6f}" for v in look_at_xyaxes(position, target, roll_deg))
         pos = " ".join(f"{v}" for v in position)
         lines.append(
             f'<camera name="{name}" mode="fixed" pos="{pos}" xyaxes="{xyaxes}" fovy="{CAMERA_FOVY}"/>'
@@ -103,8 +109,9 @@ def _table() -> str:
     {legs}"""
 
 
-def build_mjcf(task: Task, image_size: tuple[int, int]) -> str:
-    """Full MJCF of the scene for ``task`` with an offscreen buffer of ``image_size`` = (height, width)."""
+def build_mjcf(task: Task, image_size: tuple[int, int], placements: Mapping[str, CameraPlacement]) -> str:
+    """Full MJCF of the scene for ``task``, the fixed cameras at ``placements`` (one per ``CAMERAS``),
+    with an offscreen buffer of ``image_size`` = (height, width)."""
     height, width = image_size
     return f"""
 <mujoco model="omnid_{task.name}">
@@ -141,7 +148,7 @@ def build_mjcf(task: Task, image_size: tuple[int, int]) -> str:
            diffuse="0.55 0.55 0.55" specular="0.1 0.1 0.1"/>
     {_room()}
     {_table()}
-    {_cameras()}
+    {_cameras(placements)}
     {arm_worldbody()}
     {task.mjcf_bodies()}
   </worldbody>
