@@ -128,6 +128,30 @@ def pixels_to_grid(uv_pix: Tensor, image_hw: tuple[int, int]) -> Tensor:
     return (uv_pix + 0.5) * scale - 1.0
 
 
+def grid_to_pixels(grid: Tensor, image_hw: tuple[int, int]) -> Tensor:
+    """Inverse of :func:`pixels_to_grid`: (..., 2) ``grid_sample`` coordinates -> (..., 2) pixels."""
+    h, w = image_hw
+    return (grid + 1.0) * grid.new_tensor([w / 2.0, h / 2.0]) - 0.5
+
+
+def pixels_to_feature_grid(uv_pix: Tensor, feature_hw: tuple[int, int], stride: int, offset: float) -> Tensor:
+    """Image pixels -> ``grid_sample`` coordinates (``align_corners=False``) on a feature map.
+
+    Cell (i, j) of the map is centred on pixel (u, v) = (stride * j + offset, stride * i + offset) of the
+    image it was computed from (see ``backbone.feature_cell_centres``), whatever the image size: a map of
+    ``ceil(W / stride)`` cells need not span exactly the image, so the image's own grid coordinates would
+    misplace samples by up to a cell near the far edge.
+
+    Args:
+        uv_pix: (..., 2) pixel coordinates in the image.
+        feature_hw: (h, w) cells of the feature map.
+        stride, offset: where the cells are, in pixels.
+    """
+    h, w = feature_hw
+    cells = (uv_pix - offset) / stride
+    return (cells + 0.5) * uv_pix.new_tensor([2.0 / w, 2.0 / h]) - 1.0
+
+
 def project_to_grid(
     pix_T_cam: Tensor, cam_T_world: Tensor, xyz_world: Tensor, image_hw: tuple[int, int]
 ) -> tuple[Tensor, Tensor]:
@@ -172,3 +196,39 @@ def look_at(eye_world: Tensor, target_world: Tensor, up_world: Tensor | None = N
     cam_T_world[:3, :3] = torch.stack([x, y, z])  # rows: camera axes in world coordinates
     cam_T_world[:3, 3] = -cam_T_world[:3, :3] @ eye_world
     return cam_T_world
+
+
+def crop_theta(box: Tensor) -> Tensor:
+    """``F.affine_grid`` matrices that cut ``box`` out of an image and stretch it over the whole output.
+
+    Args:
+        box: (..., 4) crops as fractions of the image, (left, top, width, height), edges of the image at
+            0 and 1 (``align_corners=False``).
+    Returns:
+        (..., 2, 3) theta mapping output grid coordinates to input grid coordinates.
+    """
+    left, top, width, height = box.unbind(-1)
+    zero = torch.zeros_like(left)
+    row_x = torch.stack([width, zero, 2 * left + width - 1], dim=-1)
+    row_y = torch.stack([zero, height, 2 * top + height - 1], dim=-1)
+    return torch.stack([row_x, row_y], dim=-2)
+
+
+def crop_intrinsics(pix_T_cam: Tensor, box: Tensor, image_hw: tuple[int, int]) -> Tensor:
+    """Intrinsics of the image that :func:`crop_theta` makes: the crop resized back to ``image_hw``.
+
+    A pixel centre ``u`` of the crop (edges at ``left * W`` and ``(left + width) * W``) moves to
+    ``(u + 0.5 - left * W) / width - 0.5``.
+
+    Args:
+        pix_T_cam: (..., 3, 3) intrinsics for images of ``image_hw``.
+        box: (..., 4) (left, top, width, height) as fractions of the image.
+    """
+    h, w = image_hw
+    left, top, width, height = box.unbind(-1)
+    scale = torch.stack([1 / width, 1 / height], dim=-1)  # ..., 2
+    shift = torch.stack([left * w, top * h], dim=-1)
+    K = pix_T_cam.clone()
+    K[..., :2, :] = pix_T_cam[..., :2, :] * scale[..., :, None]
+    K[..., :2, 2] = (pix_T_cam[..., :2, 2] + 0.5 - shift) * scale - 0.5
+    return K

@@ -117,3 +117,24 @@ def test_state_dict_of_another_architecture_is_rejected(tmp_path):
 def test_group_norm_refuses_pretrained_weights_before_any_download():
     with pytest.raises(ValueError, match="`use_group_norm=True` cannot load `pretrained_backbone_weights`"):
         ResNetFeatures("resnet18", 4, use_group_norm=True, weights_path="ResNet18_Weights.IMAGENET1K_V1")
+
+
+@pytest.mark.parametrize("layer", [2, 3, 4])
+def test_feature_cells_sit_where_feature_cell_centres_says(layer):
+    """The gradient centroid of a feature cell (BatchNorm backbone in eval mode, so each cell depends only on
+    its receptive field) is at pixel ``stride * j + offset``, not at ``(j + 0.5) * stride - 0.5``. The image
+    (257 px, not a multiple of any stride) is centred on the cell, so the receptive field is cut evenly."""
+    backbone = ResNetFeatures("resnet18", layer, use_group_norm=False, weights_path=None).eval()
+    size = 257
+    j = 128 // backbone.stride
+    images = torch.rand(1, 3, size, size, requires_grad=True)
+    backbone(images)[0, :, j, j].sum().backward()
+    weight = images.grad.abs().sum(dim=(0, 1))
+    weight = weight / weight.sum()
+    pixels = torch.arange(size, dtype=torch.float32)
+    centroid = torch.stack([(weight.sum(0) * pixels).sum(), (weight.sum(1) * pixels).sum()])
+    expected = backbone.stride * j + backbone.offset
+    assert backbone.offset == 0.0
+    assert torch.allclose(centroid, torch.tensor([expected, expected]), atol=1.5)
+    spanning_the_image = (j + 0.5) * backbone.stride - 0.5  # where grid_sample over the image puts it
+    assert (centroid - spanning_the_image).abs().min() > (backbone.stride - 1) / 2 - 1.5

@@ -8,7 +8,10 @@ from lerobot_omnid.geometry import (
     FeatureVolume,
     apply_transform,
     camera_centers_world,
+    crop_intrinsics,
+    crop_theta,
     look_at,
+    pixels_to_feature_grid,
     pixels_to_grid,
     project_to_grid,
     project_to_pixels,
@@ -114,3 +117,29 @@ def test_feature_volume_rejects_bad_input():
         FeatureVolume(bounds=((0, 1), (0, 1), (0, 1)), shape=(2, 2, 2), pillar_axis="w")
     with pytest.raises(ValueError, match="min < max"):
         FeatureVolume(bounds=((1, 0), (0, 1), (0, 1)), shape=(2, 2, 2))
+
+
+@pytest.mark.parametrize(("width", "stride"), [(100, 32), (96, 8), (720, 32), (128, 16)])
+def test_pixels_to_feature_grid_reads_the_cell_centred_on_the_pixel(width, stride):
+    cells = -(-width // stride)  # a ResNet's ceil(W / stride) cells, whatever W
+    feature = torch.arange(cells, dtype=torch.float32).view(1, 1, 1, cells).expand(1, 1, 3, cells)
+    uv_pix = torch.tensor([[stride * j + 0.0, stride * 1.0] for j in range(cells)])
+    grid = pixels_to_feature_grid(uv_pix, (3, cells), stride, 0.0).view(1, 1, cells, 2)
+    sampled = F.grid_sample(feature, grid, align_corners=False).view(-1)
+    assert torch.allclose(sampled, torch.arange(cells, dtype=torch.float32), atol=1e-5)
+
+
+def test_crop_theta_and_intrinsics_move_a_pixel_together():
+    image = torch.zeros(1, 1, 60, 80)
+    image[0, 0, 20, 50] = 1.0  # v = 20, u = 50
+    box = torch.tensor([[0.25, 0.1, 0.5, 0.5]])  # left, top, width, height
+    grid = F.affine_grid(crop_theta(box), [1, 1, 60, 80], align_corners=False)
+    cropped = F.grid_sample(image, grid, align_corners=False)[0, 0]
+    ys, xs = torch.meshgrid(torch.arange(60.0), torch.arange(80.0), indexing="ij")
+    centroid = torch.stack([(cropped * xs).sum(), (cropped * ys).sum()]) / cropped.sum()
+    K = torch.tensor([[70.0, 0.0, 39.5], [0.0, 70.0, 29.5], [0.0, 0.0, 1.0]])
+    xyz_cam = torch.tensor([[(50 - 39.5) / 70, (20 - 29.5) / 70, 1.0]])
+    uv, _ = project_to_pixels(crop_intrinsics(K[None], box, (60, 80))[0], xyz_cam)
+    assert torch.allclose(uv[0], centroid, atol=1e-4)
+    full = torch.tensor([[0.0, 0.0, 1.0, 1.0]])
+    assert torch.allclose(crop_intrinsics(K[None], full, (60, 80))[0], K)

@@ -16,7 +16,7 @@ from PIL import Image
 
 from lerobot_omnid.calibration.schema import CameraCalibration, camera_matrices
 from lerobot_omnid.env_config import calibration_dict
-from lerobot_omnid.geometry import FeatureVolume, pixels_to_grid
+from lerobot_omnid.geometry import FeatureVolume, grid_to_pixels, pixels_to_grid
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 from lerobot_omnid.viz.drawing import (
     PlaneView,
@@ -25,7 +25,6 @@ from lerobot_omnid.viz.drawing import (
     bev_heatmap,
     draw_frame,
     figure_rgb,
-    grid_to_pixels,
     project_points,
     query_index,
 )

@@ -17,7 +17,12 @@ from typing import Any, NamedTuple
 import cv2
 import numpy as np
 
-from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, CalibrationError, CameraCalibration
+from lerobot_omnid.calibration.schema import (
+    ASPECT_TOLERANCE,
+    CALIBRATION_INFO_KEY,
+    CalibrationError,
+    CameraCalibration,
+)
 from lerobot_omnid.geometry import DEPTH_EPS, PAPER_VOLUME_BOUNDS
 from lerobot_omnid.keys import image_key
 
@@ -28,7 +33,6 @@ DEFAULT_VOLUME_BOUNDS = PAPER_VOLUME_BOUNDS  # OmniDConfig's default volume
 DEFAULT_MIN_VISIBLE = 0.1  # fraction of the volume's grid points that must project into the image
 MIN_EXTENT = 0.1  # the volume's projection must span this fraction of the image diagonal
 VOLUME_GRID_POINTS = 9  # grid points per axis of the volume for the visibility check
-ASPECT_TOLERANCE = 0.01  # relative difference of the x and y scale factors still treated as a resize
 DISTORTION_GRID = 33  # pixels per side of the grid on which the distortion's pixel shift is measured
 
 

@@ -26,6 +26,8 @@ from torch import Tensor
 CALIBRATION_INFO_KEY = "calibration"
 """Key of the calibration dict inside a dataset feature's ``info``."""
 
+ASPECT_TOLERANCE = 0.01
+"""Relative difference of the x and y scale factors of two image sizes still treated as a resize."""
 _ROTATION_TOLERANCE = 1e-4
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from pathlib import Path
 
 import torch
@@ -74,6 +75,38 @@ def download_backbone_weights(name: str, weights: WeightsEnum) -> dict[str, Tens
         ) from err
 
 
+def _square(layer: nn.Module, name: str) -> int:
+    """A layer's ``kernel_size`` / ``stride`` / ... as one int (AvgPool2d has no dilation: 1)."""
+    value = getattr(layer, name, 1)
+    pair = value if isinstance(value, tuple) else (value, value)
+    if pair[0] != pair[1]:
+        raise ValueError(f"feature_cell_centres: expected a square {name}, got {pair} in {layer}")
+    return int(pair[0])
+
+
+def feature_cell_centres(layers: Iterable[nn.Module]) -> tuple[int, float]:
+    """Where the cells of a chain of convolutions and poolings sit on its input image.
+
+    Output cell ``j`` of a layer with kernel ``k``, stride ``s``, padding ``p`` and dilation ``d`` is centred
+    on input position ``s * j + d * (k - 1) / 2 - p``; composing the layers in order gives the chain's
+    ``stride`` and ``offset``: output cell ``j`` is centred on input pixel ``stride * j + offset``, for any
+    input size. Layers other than ``Conv2d`` / ``MaxPool2d`` / ``AvgPool2d`` keep positions.
+
+    Returns:
+        (stride, offset) in pixels of the input, pixel centres at integers. For torchvision's ResNets
+        (``padding = (k - 1) / 2`` throughout) the offset is 0: cell ``j`` is centred on pixel
+        ``stride * j``, not on ``(j + 0.5) * stride - 0.5`` as a map spanning the image would have it.
+    """
+    stride, offset = 1, 0.0
+    for layer in layers:
+        if not isinstance(layer, nn.Conv2d | nn.MaxPool2d | nn.AvgPool2d):
+            continue
+        k, s, p, d = (_square(layer, name) for name in ("kernel_size", "stride", "padding", "dilation"))
+        offset += stride * (d * (k - 1) / 2 - p)
+        stride *= s
+    return stride, offset
+
+
 class ResNetFeatures(nn.Module):
     """torchvision ResNet truncated after ``layer{backbone_layer}``.
 
@@ -129,7 +162,11 @@ class ResNetFeatures(nn.Module):
         self.stages = nn.ModuleList(stages)
         last_block = stages[-1][-1]  # BasicBlock ends in conv2, Bottleneck in conv3
         self.out_channels = getattr(last_block, "conv3", last_block.conv2).out_channels
-        self.stride = 2 ** (backbone_layer + 1)
+        # The main path only: a block's downsample shortcut (1x1, stride 2) lands on the same positions.
+        main_path = [m for name, m in self.stem.named_modules()] + [
+            m for stage in self.stages for name, m in stage.named_modules() if "downsample" not in name
+        ]
+        self.stride, self.offset = feature_cell_centres(main_path)
         self.register_buffer("mean", torch.tensor(IMAGENET_MEAN).view(1, 3, 1, 1), persistent=False)
         self.register_buffer("std", torch.tensor(IMAGENET_STD).view(1, 3, 1, 1), persistent=False)
 

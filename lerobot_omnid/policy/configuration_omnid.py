@@ -69,7 +69,18 @@ class OmniDConfig(PreTrainedConfig):
         checkpoint_backbone: Recompute backbone activations in the backward pass (stage by stage) instead
             of storing them: much less memory at 480x480, about a third more backbone compute.
         resize_shape: (height, width) images are resized to before the backbone, intrinsics rescaled
-            accordingly; None keeps the input size. Cropping is not offered: it would break calibration.
+            accordingly; None keeps the input size. With it, cameras may deliver different image sizes
+            (each with its own calibration); without it, all cameras need one size.
+        images_stretched: The images of a camera may have another aspect ratio than its calibration
+            because they are the calibrated images stretched (K is then rescaled anisotropically).
+            False (default): such images are refused, since a camera in another sensor mode (16:9 vs
+            4:3) crops rather than stretches, and a rescaled K would be wrong.
+        random_crop_min_scale: Geometric augmentation that keeps the calibration: in training, each
+            sample's image of each camera (the same for all observation steps) is cut to a random crop
+            of ``random_crop_min_scale``..1 of each side at a random position and resized back, and that
+            sample's K is moved with it. 1.0 (default) disables it. Use this instead of LeRobot's
+            dataset transforms ``RandomAffine`` / crops, which move the images but not K (LeRobot's
+            photometric transforms, e.g. ColorJitter, are fine).
         use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
             concatenated in camera order instead of the 3D feature (then the cameras are fixed).
         volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
@@ -137,6 +148,8 @@ class OmniDConfig(PreTrainedConfig):
     backbone_layer: int = 4
     checkpoint_backbone: bool = False
     resize_shape: tuple[int, int] | None = None
+    images_stretched: bool = False
+    random_crop_min_scale: float = 1.0
 
     # Omni-Feature Generator.
     use_ofg: bool = True
@@ -220,6 +233,11 @@ class OmniDConfig(PreTrainedConfig):
             )
         if self.resize_shape is not None and (len(self.resize_shape) != 2 or min(self.resize_shape) < 1):
             raise ValueError(f"`resize_shape` must be (height, width) positive ints, got {self.resize_shape}")
+        if not 0 < self.random_crop_min_scale <= 1:
+            raise ValueError(
+                "`random_crop_min_scale`: expected a fraction in (0, 1] (1: no crop), "
+                f"got {self.random_crop_min_scale}"
+            )
         self.volume_bounds = tuple(tuple(float(v) for v in b) for b in self.volume_bounds)
         self.volume_shape = tuple(int(n) for n in self.volume_shape)
         try:

@@ -19,11 +19,27 @@ from lerobot.policies.utils import get_output_shape, populate_queues
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
-from lerobot_omnid.calibration.schema import CameraCalibration, camera_matrices
+from lerobot_omnid.calibration.schema import (
+    ASPECT_TOLERANCE,
+    CalibrationError,
+    CameraCalibration,
+    camera_matrices,
+)
+from lerobot_omnid.geometry import crop_intrinsics, crop_theta
 from lerobot_omnid.policy.backbone import ResNetFeatures
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.model_card import find_eval_results, omnid_card_section
 from lerobot_omnid.policy.omni_feature_generator import OFGOutput, OmniFeatureGenerator
+
+
+def resize_images(images: Tensor, image_hw: tuple[int, int]) -> Tensor:
+    """(..., 3, H, W) -> (..., 3, *image_hw), whole images (antialiased bilinear); unchanged at that size."""
+    if tuple(images.shape[-2:]) == image_hw:
+        return images
+    x = F.interpolate(
+        images.flatten(0, -4), size=image_hw, mode="bilinear", align_corners=False, antialias=True
+    )
+    return x.unflatten(0, images.shape[:-3])
 
 
 class OmniDPolicy(PreTrainedPolicy):
@@ -50,6 +66,7 @@ class OmniDPolicy(PreTrainedPolicy):
         self.register_buffer("cam_T_world", torch.zeros(0, 4, 4), persistent=False)
         self._calibrations: dict[str, CameraCalibration] = {}
         self._matrices_key: tuple | None = None
+        self._checked_sizes: tuple | None = None  # the per-camera image sizes last found consistent
         if config.use_ofg:
             self._calibrations = {key: config.calibration(key) for key in self.camera_keys}
         self.reset()
@@ -76,6 +93,11 @@ class OmniDPolicy(PreTrainedPolicy):
     def camera_keys(self) -> list[str]:
         return list(self.config.image_features)
 
+    def _calibration(self, key: str) -> CameraCalibration:
+        if key not in self._calibrations:
+            self.config.calibration(key)  # raises the error that names the camera and the calibrated ones
+        return self._calibrations[key]
+
     def set_calibration(self, calibrations: Mapping[str, CameraCalibration]) -> None:
         """Replace the calibration of some cameras (keyed by image feature key), in the config too.
 
@@ -86,7 +108,7 @@ class OmniDPolicy(PreTrainedPolicy):
             calib.validate(key)
             self.config.camera_calibration[key] = calib.to_dict()
         self._calibrations.update(calibrations)
-        self._matrices_key = None
+        self._matrices_key = self._checked_sizes = None
 
     def camera_matrices(self, batch_size: int, image_hw: tuple[int, int]) -> tuple[Tensor, Tensor]:
         """Calibration of ``camera_keys`` for the backbone's input, broadcast to the batch.
@@ -101,11 +123,8 @@ class OmniDPolicy(PreTrainedPolicy):
         input_hw = tuple(self.config.resize_shape or image_hw)
         key = (tuple(self.camera_keys), input_hw)
         if key != self._matrices_key:
-            missing = [k for k in self.camera_keys if k not in self._calibrations]
-            if missing:
-                self.config.calibration(missing[0])  # raises the error that names the camera
             pix_T_cam, cam_T_world = camera_matrices(
-                [self._calibrations[k] for k in self.camera_keys], [input_hw] * len(self.camera_keys)
+                [self._calibration(k) for k in self.camera_keys], [input_hw] * len(self.camera_keys)
             )
             device = self.pix_T_cam.device
             self.pix_T_cam, self.cam_T_world = pix_T_cam.to(device), cam_T_world.to(device)
@@ -139,21 +158,66 @@ class OmniDPolicy(PreTrainedPolicy):
             if not torch.isfinite(img).all():
                 raise ValueError(f"`{key}` contains NaN or infinite values")
             images.append(img)
-        shapes = {tuple(img.shape[-2:]) for img in images}
-        if len(shapes) > 1:
-            raise ValueError(
-                f"All cameras must have one image size, got {sorted(shapes)} for {self.camera_keys}"
-            )
+        sizes = tuple(tuple(img.shape[-2:]) for img in images)
+        if self.config.use_ofg:
+            self._check_image_sizes(sizes)
+        if len(set(sizes)) > 1:
+            if self.config.resize_shape is None:
+                found = ", ".join(f"{k} {h}x{w}" for k, (h, w) in zip(self.camera_keys, sizes, strict=True))
+                raise ValueError(
+                    f"All cameras must have one image size unless `resize_shape` is set, got {found}"
+                )
+            images = [resize_images(img, tuple(self.config.resize_shape)) for img in images]
         return {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
 
-    def _condition(self, stacked: dict[str, Tensor]) -> Tensor:
+    def _check_image_sizes(self, sizes: tuple[tuple[int, int], ...]) -> None:
+        """Each camera's images must be its calibrated image resized uniformly, unless they were stretched.
+
+        A 16:9 image against a 4:3 calibration is another sensor mode (a crop), for which a rescaled K is
+        wrong; only ``images_stretched=True`` says the images are the calibrated ones stretched.
+        """
+        if sizes == self._checked_sizes or self.config.images_stretched:
+            return
+        for key, (h, w) in zip(self.camera_keys, sizes, strict=True):
+            calib_h, calib_w = self._calibration(key).image_size
+            if abs((h / calib_h) / (w / calib_w) - 1) > ASPECT_TOLERANCE:
+                raise CalibrationError(
+                    f"{key}: images of {h}x{w} (height x width) for a calibration of {calib_h}x{calib_w}: "
+                    f"another aspect ratio, so K cannot be rescaled (a camera in another sensor mode crops). "
+                    f"Calibrate the camera at this size, or set `images_stretched=true` if the images are "
+                    f"the calibrated ones stretched to this size."
+                )
+        self._checked_sizes = sizes
+
+    def _condition(self, stacked: dict[str, Tensor], augment: bool = False) -> Tensor:
         images = stacked[OBS_IMAGES]
-        matrices = (
-            self.camera_matrices(images.shape[0], tuple(images.shape[-2:]))
-            if self.config.use_ofg
-            else (None, None)
-        )
-        return self.model.global_condition(images, stacked[OBS_STATE], *matrices)
+        if not self.config.use_ofg:
+            return self.model.global_condition(images, stacked[OBS_STATE], None, None)
+        image_hw = tuple(images.shape[-2:])
+        pix_T_cam, cam_T_world = self.camera_matrices(images.shape[0], image_hw)
+        if augment and self.config.random_crop_min_scale < 1:
+            images, pix_T_cam = self._random_crop(images, pix_T_cam)
+        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world)
+
+    def _random_crop(self, images: Tensor, pix_T_cam: Tensor) -> tuple[Tensor, Tensor]:
+        """Geometric augmentation that keeps the calibration: per sample and camera (the same for every
+        observation step) a random square-ratio crop of ``random_crop_min_scale``..1 of each side, resized
+        back, with K moved with it.
+
+        Args:
+            images: (B, T, S, 3, H, W).
+            pix_T_cam: (B, S, 3, 3) for the backbone's input size.
+        """
+        B, T, S = images.shape[:3]
+        scale = torch.empty(B, S, device=images.device).uniform_(self.config.random_crop_min_scale, 1.0)
+        left, top = (torch.rand(B, S, device=images.device) * (1 - scale) for _ in range(2))
+        box = torch.stack([left, top, scale, scale], dim=-1)  # B, S, 4
+        theta = crop_theta(box).to(images.dtype)[:, None].expand(B, T, S, 2, 3)  # B, T, S, 2, 3
+        x = images.flatten(0, 2)  # B*T*S, 3, H, W
+        grid = F.affine_grid(theta.reshape(-1, 2, 3), list(x.shape), align_corners=False)
+        x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
+        input_hw = tuple(self.config.resize_shape or images.shape[-2:])
+        return x.view_as(images), crop_intrinsics(pix_T_cam, box, input_hw)
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], noise: Tensor | None = None) -> Tensor:
@@ -187,7 +251,8 @@ class OmniDPolicy(PreTrainedPolicy):
         if ACTION not in batch:
             raise KeyError(f"`{ACTION}` is missing from the training batch (keys: {sorted(batch)})")
         pad = batch.get("action_is_pad") if self.config.do_mask_loss_for_padding else None
-        return self.model.compute_loss(self._condition(stacked), batch[ACTION], pad), None
+        condition = self._condition(stacked, augment=self.training)
+        return self.model.compute_loss(condition, batch[ACTION], pad), None
 
 
 class OmniDModel(nn.Module):
@@ -204,7 +269,9 @@ class OmniDModel(nn.Module):
             gradient_checkpointing=config.checkpoint_backbone,
         )
         if config.use_ofg:
-            self.ofg = OmniFeatureGenerator(config, self.backbone.out_channels)
+            self.ofg = OmniFeatureGenerator(
+                config, self.backbone.out_channels, self.backbone.stride, self.backbone.offset
+            )
             image_cond_dim = self.ofg.out_dim
         else:
             # "w/o OFG" ablation: per-camera spatial-softmax keypoints, concatenated in camera order.
@@ -249,12 +316,9 @@ class OmniDModel(nn.Module):
         """
         B, T, S = images.shape[:3]
         x = images.flatten(0, 2)  # B*T*S, 3, H, W
+        if self.config.resize_shape is not None:
+            x = resize_images(x, tuple(self.config.resize_shape))
         image_hw = tuple(x.shape[-2:])
-        if self.config.resize_shape is not None and tuple(self.config.resize_shape) != image_hw:
-            x = F.interpolate(
-                x, size=self.config.resize_shape, mode="bilinear", align_corners=False, antialias=True
-            )
-            image_hw = tuple(self.config.resize_shape)
         features = self.backbone(x)  # B*T*S, C, h, w
         if not self.config.use_ofg:
             return self.pool(features).view(B, T, -1), None

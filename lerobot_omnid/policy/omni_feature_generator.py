@@ -18,7 +18,12 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from lerobot_omnid.geometry import camera_centers_world, project_to_grid
+from lerobot_omnid.geometry import (
+    camera_centers_world,
+    grid_to_pixels,
+    pixels_to_feature_grid,
+    project_to_grid,
+)
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.deformable_sampling import multi_camera_deformable_sampling
 
@@ -33,11 +38,13 @@ class CameraGeometry:
         anchor_grid: (B, S, Q, A, 2) anchors in ``grid_sample`` coordinates of each camera's image.
         anchor_visible: (B, S, Q, A) bool: anchor in front of the camera and inside its image.
         descriptor: (B, S, Q, CAMERA_GEOMETRY_DIM) camera-relative geometry of each pillar.
+        image_hw: (height, width) of the images the grid coordinates refer to (the backbone's input).
     """
 
     anchor_grid: Tensor
     anchor_visible: Tensor
     descriptor: Tensor
+    image_hw: tuple[int, int]
 
 
 def camera_geometry(
@@ -64,7 +71,7 @@ def camera_geometry(
     descriptor = torch.cat(
         [ray, centre_grid.clamp(-2.0, 2.0), anchor_visible.float().mean(dim=-1, keepdim=True)], dim=-1
     )
-    return CameraGeometry(anchor_grid, anchor_visible, descriptor)
+    return CameraGeometry(anchor_grid, anchor_visible, descriptor, tuple(image_hw))
 
 
 def plane_keypoints(compressed: Tensor, plane_xy: Tensor) -> Tensor:
@@ -81,10 +88,18 @@ def plane_keypoints(compressed: Tensor, plane_xy: Tensor) -> Tensor:
 
 
 class CameraCrossAttention(nn.Module):
-    """Deformable attention from the plane queries to the feature maps of all cameras."""
+    """Deformable attention from the plane queries to the feature maps of all cameras.
 
-    def __init__(self, config: OmniDConfig, num_anchors: int) -> None:
+    ``feature_stride`` and ``feature_offset`` say where the feature cells are in the image (cell ``j``
+    centred on pixel ``feature_stride * j + feature_offset``): samples are taken there, for any image size.
+    """
+
+    def __init__(
+        self, config: OmniDConfig, num_anchors: int, feature_stride: int, feature_offset: float
+    ) -> None:
         super().__init__()
+        self.feature_stride = feature_stride
+        self.feature_offset = feature_offset
         self.num_heads = config.num_heads
         self.num_anchors = num_anchors
         self.num_points = config.num_points
@@ -122,18 +137,25 @@ class CameraCrossAttention(nn.Module):
             geometry: projections of the anchors, see :func:`camera_geometry`.
         Returns:
             out: (B, Q, D) fused features.
-            sampling_grid: (B, S, Q, heads, A, P, 2) where each sample was taken.
+            sampling_grid: (B, S, Q, heads, A, P, 2) where each sample was taken, in the image's grid
+                coordinates (``geometry.image_hw``).
             weights: (B, S, Q, heads, A, P) its attention weight (zero where not visible).
         """
         B, S, D, H, W = features.shape
         Q, heads, A, P = queries.shape[1], self.num_heads, self.num_anchors, self.num_points
+        image_h, image_w = geometry.image_hw
 
         camera_queries = queries[:, None] + self.camera_embed(geometry.descriptor)  # B, S, Q, D
-        # Offsets are predicted in feature-map cells: B, S, Q, heads*A*P*2 -> B, S, Q, heads, A, P, 2
+        # Offsets are predicted in feature cells (``feature_stride`` pixels each), drawn in the image's grid
+        # coordinates: B, S, Q, heads*A*P*2 -> B, S, Q, heads, A, P, 2
         offsets = self.sampling_offsets(camera_queries).view(B, S, Q, heads, A, P, 2)
-        offsets = offsets * offsets.new_tensor([2.0 / W, 2.0 / H])
+        offsets = offsets * offsets.new_tensor([2.0 / image_w, 2.0 / image_h]) * self.feature_stride
         # B, S, Q, A, 2 -> B, S, Q, 1, A, 1, 2 (+ offsets) -> B, S, Q, heads, A, P, 2
         sampling_grid = geometry.anchor_grid[:, :, :, None, :, None, :] + offsets
+        # Image grid -> pixels -> the feature map's own grid, where each cell really is.
+        feature_grid = pixels_to_feature_grid(
+            grid_to_pixels(sampling_grid, geometry.image_hw), (H, W), self.feature_stride, self.feature_offset
+        )
 
         logits = self.attention_logits(camera_queries).view(B, S, Q, heads, A, P)
         mask = geometry.anchor_visible[:, :, :, None, :, None].expand(B, S, Q, heads, A, P)
@@ -148,7 +170,7 @@ class CameraCrossAttention(nn.Module):
         values = values.view(B, S, H, W, heads, D // heads).permute(0, 1, 4, 5, 2, 3)
         fused = multi_camera_deformable_sampling(
             values,
-            sampling_grid.reshape(B, S, Q, heads, A * P, 2),
+            feature_grid.reshape(B, S, Q, heads, A * P, 2),
             weights.reshape(B, S, Q, heads, A * P),
             query_chunk_size=self.query_chunk_size,
             use_checkpoint=self.checkpoint_sampling and self.training,
@@ -178,14 +200,16 @@ class QuerySelfAttention(nn.Module):
 class OFGLayer(nn.Module):
     """(optional) query self-attention, camera cross-attention, feed-forward; post-norm residuals."""
 
-    def __init__(self, config: OmniDConfig, num_anchors: int) -> None:
+    def __init__(
+        self, config: OmniDConfig, num_anchors: int, feature_stride: int, feature_offset: float
+    ) -> None:
         super().__init__()
         d = config.d_model
         self.self_attn = (
             QuerySelfAttention(d, config.num_heads, config.dropout) if config.use_self_attention else None
         )
         self.norm_self = nn.LayerNorm(d) if config.use_self_attention else None
-        self.cross_attn = CameraCrossAttention(config, num_anchors)
+        self.cross_attn = CameraCrossAttention(config, num_anchors, feature_stride, feature_offset)
         self.norm_cross = nn.LayerNorm(d)
         self.ffn = nn.Sequential(
             nn.Linear(d, config.ffn_dim), nn.ReLU(), nn.Dropout(config.dropout), nn.Linear(config.ffn_dim, d)
@@ -229,7 +253,9 @@ class OFGOutput:
 class OmniFeatureGenerator(nn.Module):
     """Multi-camera feature maps + calibration -> flattened, channel-compressed plane feature."""
 
-    def __init__(self, config: OmniDConfig, in_channels: int) -> None:
+    def __init__(
+        self, config: OmniDConfig, in_channels: int, feature_stride: int, feature_offset: float
+    ) -> None:
         super().__init__()
         volume = config.feature_volume
         self.register_buffer("anchors_world", volume.anchors_world(), persistent=False)  # Q, A, 3
@@ -241,7 +267,10 @@ class OmniFeatureGenerator(nn.Module):
         self.input_proj = nn.Sequential(nn.Conv2d(in_channels, d, kernel_size=1), nn.GroupNorm(1, d))
         self.query_embed = nn.Parameter(torch.randn(volume.num_queries, d) * 0.02)
         self.query_pos = nn.Sequential(nn.Linear(3, d), nn.ReLU(), nn.Linear(d, d))
-        self.layers = nn.ModuleList(OFGLayer(config, volume.num_anchors) for _ in range(config.num_layers))
+        self.layers = nn.ModuleList(
+            OFGLayer(config, volume.num_anchors, feature_stride, feature_offset)
+            for _ in range(config.num_layers)
+        )
         self.compress = nn.Linear(d, config.compressed_channels)
         if config.plane_readout == "flatten":
             if config.zero_init_compression:  # see the config: the condition grows from zero as it trains

@@ -27,7 +27,7 @@ from matplotlib.patches import Rectangle
 from matplotlib.patheffects import withStroke
 from torch import Tensor
 
-from lerobot_omnid.geometry import AXES, FeatureVolume, project_to_grid
+from lerobot_omnid.geometry import AXES, FeatureVolume, grid_to_pixels, project_to_grid
 from lerobot_omnid.policy.omni_feature_generator import OFGOutput
 
 ANCHOR_CMAP = "viridis"  # anchors coloured by height
@@ -44,12 +44,6 @@ ANCHOR_SIZE = 5.0  # points^2: marker area of an anchor
 SAMPLE_MAX_SIZE = 60.0  # points^2: marker area of the heaviest sample
 SAMPLE_MIN_SIZE = 4.0
 VIDEO_CODECS = ("libx264", "mpeg4")  # the first one PyAV has is used
-
-
-def grid_to_pixels(grid: Tensor, image_hw: tuple[int, int]) -> Tensor:
-    """Inverse of :func:`~lerobot_omnid.geometry.pixels_to_grid`: (..., 2) grid coords -> (..., 2) pixels."""
-    h, w = image_hw
-    return (grid + 1.0) * grid.new_tensor([w / 2.0, h / 2.0]) - 0.5
 
 
 def project_points(
