@@ -1,7 +1,10 @@
 """``--env.type=omnid``: the multi-view MuJoCo benchmark envs (package ``gym_omnid``) for ``lerobot-eval``.
 
 LeRobot builds ``gym.make(f"gym_omnid/{task}", **gym_kwargs)`` from this config and maps the env's
-observation ``pixels[<cam>]`` to ``observation.images.<cam>`` and ``agent_pos`` to ``observation.state``.
+observation ``pixels[<cam>]`` to ``observation.images.<cam>`` and ``agent_pos`` to ``observation.state``;
+with ``per_frame_calibration`` also ``extrinsics.<cam>`` / ``intrinsics.<cam>`` to the dataset columns
+``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``
+(:mod:`lerobot_omnid.calibration.frame_columns`).
 
 Example::
 
@@ -17,22 +20,32 @@ from typing import Any
 import gymnasium as gym
 
 # Importing gym_omnid.constants imports gym_omnid, which registers the gym ids (gymnasium only, cheap).
+from gym_omnid.calibration import EXTRINSICS_OBS_PREFIX, INTRINSICS_OBS_PREFIX
 from gym_omnid.constants import (
     ACTION_DIM,
+    ALL_CAMERAS,
     BACKGROUNDS,
-    CAMERAS,
     CONTROL_FPS,
+    DEFAULT_RIG,
     LAYOUTS,
     MAX_EPISODE_STEPS,
     MAX_IMAGE_SIDE,
+    RIGS,
     STATE_DIM,
     TASKS,
     TRAIN_CAMERAS,
+    WRIST_CAMERA,
 )
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 
+from lerobot_omnid.calibration.frame_columns import (
+    EXTRINSICS_NAMES,
+    INTRINSICS_NAMES,
+    extrinsics_key,
+    intrinsics_key,
+)
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.cli import check_choice, check_positive_int
 
@@ -44,12 +57,12 @@ def validate_cameras(field_name: str, cameras: Any) -> list[str]:
     """Check a camera list: non-empty, known names, no duplicates. Returns it as a list."""
     if isinstance(cameras, str) or not isinstance(cameras, list | tuple) or not cameras:
         raise ValueError(
-            f"{field_name}: expected a non-empty list of cameras from {list(CAMERAS)}, got {cameras!r}"
+            f"{field_name}: expected a non-empty list of cameras from {list(ALL_CAMERAS)}, got {cameras!r}"
         )
-    unknown = [c for c in cameras if c not in CAMERAS]
+    unknown = [c for c in cameras if c not in ALL_CAMERAS]
     if unknown:
         raise ValueError(
-            f"{field_name}: unknown camera(s) {unknown}; expected names from {list(CAMERAS)}, "
+            f"{field_name}: unknown camera(s) {unknown}; expected names from {list(ALL_CAMERAS)}, "
             f"got {list(cameras)}"
         )
     if len(set(cameras)) != len(cameras):
@@ -86,20 +99,28 @@ def validate_image_size(field_name: str, image_size: Any) -> int:
 class OmniDEnvConfig(EnvConfig):
     """One task of the OmniD multi-view benchmark, in one evaluation setting.
 
-    The fields a user changes are ``task``, ``layout`` and ``background`` (the evaluation setting),
-    ``cameras`` (must match the cameras the policy was trained on) and ``image_size`` (must match the
-    training dataset's images).
+    The fields a user changes are ``task``, ``layout``, ``background`` and ``rig`` (the evaluation
+    setting), ``cameras`` (must match the cameras the policy was trained on), ``image_size`` (must match
+    the training dataset's images) and ``per_frame_calibration`` (on for a policy trained on per-frame
+    calibration columns, e.g. with the wrist camera).
 
     Args:
         task: Benchmark task, one of ``gym_omnid.constants.TASKS``.
-        cameras: Fixed cameras whose images are observed, from ``cam_a`` ... ``cam_e``. Default: the
-            training cameras B, C, D, E (camera A is the unseen view of the few-shot protocol).
-            On the command line: ``--env.cameras='[cam_b,cam_c]'``.
+        cameras: Cameras whose images are observed: the fixed ``cam_a`` ... ``cam_e`` and the wrist camera
+            ``cam_wrist``. Default: the training cameras B, C, D, E (camera A is the unseen view of the
+            few-shot protocol). On the command line: ``--env.cameras='[cam_b,cam_c]'``.
         layout: Object placement: ``"id"`` (the 10 cm x 10 cm square seen in training),
             ``"position_ood"`` (the band from 10 to 20 cm around it) or a graded band ``"position_band_1"``
             ... ``"position_band_4"`` (0-2.5, 2.5-5, 5-7.5, 7.5-10 cm outside the square).
         background: Table texture: ``"id"`` or one of the unseen ``"ood1"`` ... ``"ood4"``.
         image_size: Side of the square camera images, pixels.
+        rig: Placements of the five fixed cameras, one of ``gym_omnid.RIGS``: ``"default"`` (the
+            benchmark's), ``"closer"``, ``"higher"``, ``"bumped"`` (every camera moved 8-17 cm and turned
+            5-14 degrees). ``--env.rig=bumped``.
+        per_frame_calibration: Add every observed camera's calibration of the current frame to the
+            observation, which ``lerobot-eval`` passes to the policy as ``observation.extrinsics.<cam>``
+            (16 values, ``T_cam_world`` row-major) and ``observation.intrinsics.<cam>`` (9, ``K``), the
+            columns ``omnid-record --per-frame-calibration`` writes. ``--env.per_frame_calibration=true``.
         blackout_cameras: Observed cameras whose images are all black (zero pixels), for a control in which
             only the state can drive the policy. Default: none. ``--env.blackout_cameras='[cam_b,cam_c]'``.
         episode_length: Time limit of an episode, env steps (at ``fps`` steps per second).
@@ -113,6 +134,8 @@ class OmniDEnvConfig(EnvConfig):
     layout: str = "id"
     background: str = "id"
     image_size: int = 128
+    rig: str = DEFAULT_RIG
+    per_frame_calibration: bool = False
     blackout_cameras: list[str] = field(default_factory=list)
     episode_length: int = MAX_EPISODE_STEPS
     fps: int = CONTROL_FPS
@@ -126,6 +149,11 @@ class OmniDEnvConfig(EnvConfig):
         check_choice("layout", self.layout, LAYOUTS)
         check_choice("background", self.background, BACKGROUNDS)
         validate_image_size("image_size", self.image_size)
+        check_choice("rig", self.rig, RIGS)
+        if not isinstance(self.per_frame_calibration, bool):
+            raise ValueError(
+                f"`per_frame_calibration`: expected true or false, got {self.per_frame_calibration!r}"
+            )
         self.blackout_cameras = validate_blackout_cameras(self.blackout_cameras, self.cameras)
         check_positive_int("episode_length", self.episode_length)
         if self.fps != CONTROL_FPS:
@@ -146,6 +174,15 @@ class OmniDEnvConfig(EnvConfig):
                 type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3)
             )
             self.features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
+        if self.per_frame_calibration:
+            # STATE, as LeRobot's dataset_to_policy_features types these columns of a dataset.
+            for cam in self.cameras:
+                for prefix, key, names in (
+                    (EXTRINSICS_OBS_PREFIX, extrinsics_key(cam), EXTRINSICS_NAMES),
+                    (INTRINSICS_OBS_PREFIX, intrinsics_key(cam), INTRINSICS_NAMES),
+                ):
+                    self.features[prefix + cam] = PolicyFeature(type=FeatureType.STATE, shape=(len(names),))
+                    self.features_map[prefix + cam] = key
 
     @property
     def package_name(self) -> str:
@@ -158,6 +195,8 @@ class OmniDEnvConfig(EnvConfig):
             "layout": self.layout,
             "background": self.background,
             "image_size": self.image_size,
+            "rig": self.rig,
+            "per_frame_calibration": self.per_frame_calibration,
             "blackout_cameras": tuple(self.blackout_cameras),
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
@@ -167,8 +206,14 @@ class OmniDEnvConfig(EnvConfig):
         """Calibration of each observed camera, keyed like the policy's image features.
 
         Builds the env once. Returns ``{"observation.images.<cam>": CameraCalibration.to_dict()}`` for
-        images of ``image_size``: what a dataset recorded in this setting stores in its feature info.
+        images of ``image_size``: what a dataset recorded in this setting without per-frame calibration
+        stores in its feature info. The wrist camera has none (it moves): its calibration is per frame.
         """
+        if WRIST_CAMERA in self.cameras:
+            raise ValueError(
+                f"cameras: {WRIST_CAMERA} moves with the arm and has no static calibration; expected fixed "
+                f"cameras only, got {self.cameras} (its per-frame calibration: per_frame_calibration=True)"
+            )
         env = gym.make(self.gym_id, disable_env_checker=True, **self.gym_kwargs)
         try:
             return {

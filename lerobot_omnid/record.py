@@ -6,6 +6,13 @@ carry the env's state and action names; every frame's ``task`` is the env's lang
 successful expert episodes are kept. Attempt ``i`` (counting failed ones) resets the env with seed
 ``seed + i``, so the same arguments give the same data.
 
+With ``--per-frame-calibration`` every camera's calibration is instead written in every frame, as the
+columns ``observation.extrinsics.<cam>`` and ``observation.intrinsics.<cam>``
+(:mod:`lerobot_omnid.calibration.frame_columns`), and the image features' ``info`` holds no
+calibration: the feature schema is then the same for every rig (``--rig``), so datasets recorded with
+different rigs merge with ``lerobot-edit-dataset --operation.type merge``. The wrist camera
+(``cam_wrist``) moves, so it is recorded only this way.
+
 Example::
 
     MUJOCO_GL=egl omnid-record --task select_apple --episodes 50 --root data/omnid_select_apple
@@ -30,11 +37,27 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from gym_omnid.constants import BACKGROUNDS, CAMERAS, LAYOUTS, MAX_EPISODE_STEPS, MAX_IMAGE_SIDE, TASKS
+from gym_omnid.calibration import EXTRINSICS_OBS_PREFIX, INTRINSICS_OBS_PREFIX
+from gym_omnid.constants import (
+    BACKGROUNDS,
+    CAMERAS,
+    DEFAULT_RIG,
+    LAYOUTS,
+    MAX_EPISODE_STEPS,
+    MAX_IMAGE_SIDE,
+    RIGS,
+    TASKS,
+    WRIST_CAMERA,
+)
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES, OBS_STATE
 from tqdm import tqdm
 
+from lerobot_omnid.calibration.frame_columns import (
+    calibration_column_features,
+    extrinsics_key,
+    intrinsics_key,
+)
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
 from lerobot_omnid.cli import check_positive_int, positive_int
 from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras, validate_image_size
@@ -44,6 +67,9 @@ ROBOT_TYPE = "omnid_sim_arm"
 
 EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (128 + SIGINT), as shells report it."""
+
+IMAGE_NAMES = ["height", "width", "channels"]
+"""``names`` of the video features' dimensions."""
 
 
 @dataclass(frozen=True)
@@ -117,22 +143,34 @@ class _StopOnSigint:
             signal.signal(signal.SIGINT, self._previous)
 
 
-def dataset_features(env: gym.Env, cameras: Sequence[str], image_size: int) -> dict[str, dict]:
-    """LeRobot feature spec of the recorded dataset: calibrated videos, named state and action."""
+def check_wrist_calibration(cameras: Sequence[str], per_frame_calibration: bool) -> None:
+    """Refuse the wrist camera without per-frame calibration: a moving camera has no static one."""
+    if WRIST_CAMERA in cameras and not per_frame_calibration:
+        raise ValueError(
+            f"cameras: {WRIST_CAMERA} moves with the arm, so its calibration changes every frame; expected "
+            f"--per-frame-calibration (per_frame_calibration=True) with it, got cameras {list(cameras)} "
+            f"without"
+        )
+
+
+def dataset_features(
+    env: gym.Env, cameras: Sequence[str], image_size: int, per_frame_calibration: bool = False
+) -> dict[str, dict]:
+    """LeRobot feature spec of the recorded dataset: videos, named state and action, and each camera's
+    calibration: static in the video feature's info, or per frame as columns."""
     unwrapped = env.unwrapped
     features: dict[str, dict] = {}
     for cam in cameras:
         key = f"{OBS_IMAGES}.{cam}"
-        features[key] = {
-            "dtype": "video",
-            "shape": (image_size, image_size, 3),
-            "names": ["height", "width", "channels"],
-            "info": {CALIBRATION_INFO_KEY: calibration_dict(unwrapped, cam, key)},
-        }
+        features[key] = {"dtype": "video", "shape": (image_size, image_size, 3), "names": IMAGE_NAMES}
+        if not per_frame_calibration:
+            features[key]["info"] = {CALIBRATION_INFO_KEY: calibration_dict(unwrapped, cam, key)}
     state_names = list(unwrapped.state_names)
     action_names = list(unwrapped.action_names)
     features[OBS_STATE] = {"dtype": "float32", "shape": (len(state_names),), "names": state_names}
     features[ACTION] = {"dtype": "float32", "shape": (len(action_names),), "names": action_names}
+    if per_frame_calibration:
+        features.update(calibration_column_features(cameras))
     return features
 
 
@@ -147,9 +185,15 @@ def _check_root(root: Path) -> None:
 
 
 def _run_expert_episode(
-    env: gym.Env, dataset: LeRobotDataset, cameras: Sequence[str], seed: int, stop: _StopOnSigint
+    env: gym.Env,
+    dataset: LeRobotDataset,
+    cameras: Sequence[str],
+    per_frame_calibration: bool,
+    seed: int,
+    stop: _StopOnSigint,
 ) -> bool | None:
-    """Roll out the expert once, adding every frame to the dataset's episode buffer.
+    """Roll out the expert once, adding every frame (with the calibration the env observed it with, when
+    ``per_frame_calibration``) to the dataset's episode buffer.
 
     Returns the episode's success, or None when a stop was requested before it ended.
     """
@@ -163,6 +207,9 @@ def _run_expert_episode(
         frame = {OBS_STATE: np.asarray(obs["agent_pos"], dtype=np.float32), ACTION: action, "task": task}
         for cam in cameras:
             frame[f"{OBS_IMAGES}.{cam}"] = obs["pixels"][cam]
+            if per_frame_calibration:
+                frame[extrinsics_key(cam)] = obs[f"{EXTRINSICS_OBS_PREFIX}{cam}"]
+                frame[intrinsics_key(cam)] = obs[f"{INTRINSICS_OBS_PREFIX}{cam}"]
         dataset.add_frame(frame)
         obs, _, terminated, truncated, info = env.step(action)
         if stop.requested:
@@ -181,6 +228,8 @@ def record_dataset(
     layout: str = "id",
     background: str = "id",
     image_size: int = 128,
+    rig: str = DEFAULT_RIG,
+    per_frame_calibration: bool = False,
     seed: int = 0,
     max_attempts: int | None = None,
     episode_length: int = MAX_EPISODE_STEPS,
@@ -192,7 +241,10 @@ def record_dataset(
 
     Args:
         root: Output directory; must not exist or be empty. Default ``$HF_LEROBOT_HOME/<repo_id>``.
-        task, cameras, layout, background, image_size: The env setting (see ``OmniDEnvConfig``).
+        task, cameras, layout, background, image_size, rig: The env setting (see ``OmniDEnvConfig``).
+        per_frame_calibration: Write every camera's calibration in every frame as the columns
+            ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>`` instead of once in the
+            image feature's info (needed for ``cam_wrist``; makes datasets of different rigs mergeable).
         episodes: Successful episodes to save.
         repo_id: Dataset id; default ``local/omnid_<task>``.
         seed: Attempt ``i`` resets the env with ``seed + i``.
@@ -205,6 +257,7 @@ def record_dataset(
         show_progress: Show a tqdm bar over episodes.
     """
     check_positive_int("episodes", episodes)
+    check_wrist_calibration(cameras, per_frame_calibration)
     max_attempts = 2 * episodes + 10 if max_attempts is None else max_attempts
     if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < episodes:
         raise ValueError(f"max_attempts: expected an int >= episodes ({episodes}), got {max_attempts!r}")
@@ -214,6 +267,8 @@ def record_dataset(
         layout=layout,
         background=background,
         image_size=image_size,
+        rig=rig,
+        per_frame_calibration=per_frame_calibration,
         episode_length=episode_length,
     )
     repo_id = repo_id or f"local/omnid_{task}"
@@ -231,7 +286,7 @@ def record_dataset(
     attempts = saved = 0
     interrupted = False
     try:
-        features = dataset_features(env, cfg.cameras, cfg.image_size)
+        features = dataset_features(env, cfg.cameras, cfg.image_size, cfg.per_frame_calibration)
         # Streaming: frames go to per-camera encoder threads (no PNG round trip). Their queues hold a
         # whole episode, so a frame is never dropped however slow the encoder is.
         dataset = LeRobotDataset.create(
@@ -251,7 +306,9 @@ def record_dataset(
         ):
             while saved < episodes and attempts < max_attempts:
                 attempts += 1
-                success = _run_expert_episode(env, dataset, cfg.cameras, seed + attempts - 1, stop)
+                success = _run_expert_episode(
+                    env, dataset, cfg.cameras, cfg.per_frame_calibration, seed + attempts - 1, stop
+                )
                 if success is None:
                     break
                 if success:
@@ -343,6 +400,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--image-size", type=_image_size, default=128, help="square image side, pixels (default: %(default)s)"
     )
     parser.add_argument(
+        "--rig",
+        choices=RIGS,
+        default=DEFAULT_RIG,
+        help="placements of the fixed cameras (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--per-frame-calibration",
+        action="store_true",
+        help="write every camera's calibration in every frame (columns observation.extrinsics.<cam>, "
+        "observation.intrinsics.<cam>) instead of once in the feature info; needed for cam_wrist, makes "
+        "datasets of different rigs mergeable",
+    )
+    parser.add_argument(
         "--seed", type=int, default=0, help="attempt i resets the env with seed + i (default: %(default)s)"
     )
     parser.add_argument(
@@ -383,6 +453,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(
             f"--max-attempts: expected at least --episodes ({args.episodes}), got {args.max_attempts}"
         )
+    try:
+        check_wrist_calibration(args.cameras, args.per_frame_calibration)
+    except ValueError as e:
+        parser.error(str(e))
     repo_id = args.repo_id or f"local/omnid_{args.task}"
     if args.push_to_hub and repo_id.startswith("local/"):
         parser.error(
@@ -404,6 +478,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         layout=args.layout,
         background=args.background,
         image_size=args.image_size,
+        rig=args.rig,
+        per_frame_calibration=args.per_frame_calibration,
         seed=args.seed,
         max_attempts=args.max_attempts,
         push_to_hub=args.push_to_hub,

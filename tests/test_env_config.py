@@ -21,6 +21,7 @@ from lerobot.processor import (
 )
 from lerobot.scripts.lerobot_eval import rollout
 
+from lerobot_omnid.calibration.frame_columns import extrinsics_from_column
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig
 
@@ -70,6 +71,8 @@ def test_features_for_camera_subset():
         "layout": "position_ood",
         "background": "ood2",
         "image_size": 64,
+        "rig": "default",
+        "per_frame_calibration": False,
         "blackout_cameras": (),
         "render_mode": "rgb_array",
         "max_episode_steps": 30,
@@ -86,6 +89,8 @@ def test_features_for_camera_subset():
         ({"layout": "far"}, "layout", "'far'"),
         ({"background": "ood5"}, "background", "'ood5'"),
         ({"image_size": 0}, "image_size", "0"),
+        ({"rig": "lab9"}, "rig", "'lab9'"),
+        ({"per_frame_calibration": "yes"}, "per_frame_calibration", "'yes'"),
         ({"blackout_cameras": ["cam_a"]}, "blackout_cameras", "['cam_a']"),
         ({"blackout_cameras": ["cam_b", "cam_b"]}, "blackout_cameras", "['cam_b', 'cam_b']"),
         ({"blackout_cameras": "cam_b"}, "blackout_cameras", "'cam_b'"),
@@ -177,3 +182,38 @@ def test_lerobot_rollout_counts_expert_success():
         vec.close()
     assert result["success"].any()
     assert result["done"][0, -1] and result["action"].shape[1] < cfg.episode_length
+
+
+def test_rig_and_per_frame_calibration_reach_the_policy_batch():
+    """``--env.rig`` and ``--env.per_frame_calibration``: lerobot-eval's batch carries each camera's
+    calibration of the frame under the dataset columns' names, unnormalised, the rig's own."""
+
+    @dataclass
+    class Cli:
+        env: EnvConfig
+
+    args = ["--env.type=omnid", "--env.cameras=[cam_b,cam_wrist]", "--env.image_size=32"]
+    cfg = draccus.parse(Cli, args=[*args, "--env.rig=bumped", "--env.per_frame_calibration=true"]).env
+    assert (cfg.rig, cfg.per_frame_calibration) == ("bumped", True)
+    assert cfg.features_map["extrinsics.cam_wrist"] == "observation.extrinsics.cam_wrist"
+    assert cfg.features_map["intrinsics.cam_b"] == "observation.intrinsics.cam_b"
+    policy_features = env_to_policy_features(cfg)
+    assert policy_features["observation.extrinsics.cam_b"].shape == (16,)
+    assert policy_features["observation.intrinsics.cam_wrist"].shape == (9,)
+    vec = make_env(cfg, n_envs=1)["omnid"][0]
+    try:
+        obs, _ = vec.reset(seed=[0])
+        batch = preprocess_observation(obs)
+        env = vec.envs[0].unwrapped
+        assert env.rig == "bumped"
+        for cam in ("cam_b", "cam_wrist"):
+            calib = env.camera_calibration(cam)
+            T_cam_world = extrinsics_from_column(batch[f"observation.extrinsics.{cam}"])
+            assert T_cam_world.shape == (1, 4, 4)
+            np.testing.assert_allclose(T_cam_world[0].numpy(), calib["T_cam_world"], atol=1e-6)
+            K = batch[f"observation.intrinsics.{cam}"].reshape(1, 3, 3)
+            np.testing.assert_allclose(K[0].numpy(), calib["K"], rtol=1e-6)
+    finally:
+        vec.close()
+    with pytest.raises(ValueError, match="cam_wrist moves with the arm"):
+        cfg.camera_calibrations()

@@ -20,6 +20,7 @@ from gym_omnid.constants import ACTION_NAMES, CAMERAS, STATE_NAMES
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from lerobot_omnid.calibration.frame_columns import is_calibration_key
 from lerobot_omnid.calibration.schema import calibration_from_feature_info
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.record import EXIT_INTERRUPTED, main, record_dataset
@@ -120,6 +121,7 @@ def test_dataset_loads_with_calibrated_videos_names_and_task(five_cam_root):
         assert calib.image_size == (SIZE, SIZE)
         assert calib.to_dict() == expected[key]
 
+    assert not any(is_calibration_key(key) for key in meta.features)  # per-frame columns are opt-in
     assert meta.features["observation.state"]["names"] == list(STATE_NAMES)
     assert meta.features["action"]["names"] == list(ACTION_NAMES)
     assert meta.features["observation.state"]["dtype"] == "float32"
@@ -236,6 +238,8 @@ def test_main_records_and_prints_summary(tmp_path, capsys):
         (["--episodes", "0"], ["--episodes", ">= 1", "0"]),
         (["--image-size", "-1"], ["--image-size", "-1"]),
         (["--image-size", "5000"], ["--image-size", "2048", "5000"]),
+        (["--rig", "lab9"], ["--rig", "lab9", "bumped"]),
+        (["--cameras", "cam_b,cam_wrist"], ["cam_wrist", "--per-frame-calibration"]),
         (["--episodes", "3", "--max-attempts", "2"], ["--max-attempts", "3", "2"]),
         (["--push-to-hub"], ["--repo-id", "namespace", "local/omnid_select_apple"]),
     ],
