@@ -27,10 +27,20 @@ Checks, all done before anything is written (every problem is reported, naming c
 Then ``meta/info.json`` is replaced atomically (a temporary file moved over it), after saving the previous
 one to ``meta/info.json.bak`` (delete it before pushing the dataset to the Hub, or pass ``--no-backup``).
 
+``--per-frame-columns NEW_ROOT`` instead writes a copy of the dataset (data rewritten with the new
+columns, videos copied as they are) in which every checked camera's calibration is a constant per-frame
+column (``observation.extrinsics.<cam>``, ``observation.intrinsics.<cam>``:
+:mod:`lerobot_omnid.calibration.frame_columns`) and the image features' ``info`` holds no calibration:
+the feature schema of datasets recorded with ``omnid-record --per-frame-calibration``, so that the copy
+merges with them and with copies of datasets from other rigs. The calibration is the file's or, without
+``--calibration``, the one already in the dataset's feature ``info``; the same checks run first. The
+source dataset is not touched.
+
 Example::
 
     omnid-attach-calibration --root ~/.cache/huggingface/lerobot/me/so100_pick --calibration rig.yaml
     omnid-attach-calibration --repo-id me/so100_pick --calibration rig.yaml   # downloads it first
+    omnid-attach-calibration --root data/apple --per-frame-columns data/apple_columns  # info -> columns
 """
 
 from __future__ import annotations
@@ -46,15 +56,32 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lerobot_omnid.calibration.checks import (
     DEFAULT_MIN_VISIBLE,
     DEFAULT_VOLUME_BOUNDS,
     DISTORTION_MODES,
+    SOURCE_INFO_KEY,
     CameraReport,
     plan_attachment,
 )
+from lerobot_omnid.calibration.frame_columns import (
+    calibration_column_features,
+    extrinsics_column,
+    extrinsics_key,
+    intrinsics_column,
+    intrinsics_key,
+    is_calibration_key,
+)
 from lerobot_omnid.calibration.rig_file import load_calibration_file
-from lerobot_omnid.calibration.schema import CalibrationError
+from lerobot_omnid.calibration.schema import (
+    CALIBRATION_INFO_KEY,
+    CalibrationError,
+    CameraCalibration,
+    calibration_from_feature_info,
+)
+from lerobot_omnid.keys import image_key
 
 INFO_PATH = Path("meta") / "info.json"
 BACKUP_SUFFIX = ".bak"
@@ -114,11 +141,95 @@ def attach_calibration(
     return reports
 
 
+def _info_calibrations(info: Mapping[str, Any], skip: Sequence[str]) -> dict[str, CameraCalibration]:
+    """The calibration in the feature ``info`` of every image feature not skipped (errors name the key)."""
+    skip_keys = {image_key(c) for c in skip}
+    return {
+        key: calibration_from_feature_info(key, feature)
+        for key, feature in info.get("features", {}).items()
+        if feature.get("dtype") in ("video", "image") and key not in skip_keys
+    }
+
+
+def write_per_frame_columns(
+    root: str | Path,
+    new_root: str | Path,
+    calibration_path: str | Path | None = None,
+    new_repo_id: str | None = None,
+    volume_bounds=DEFAULT_VOLUME_BOUNDS,
+    min_visible: float = DEFAULT_MIN_VISIBLE,
+    distortion: str = "refuse",
+    skip: Sequence[str] = (),
+    dry_run: bool = False,
+) -> list[CameraReport]:
+    """Copy the dataset at ``root`` to ``new_root`` with each camera's calibration as constant per-frame
+    columns and none in the image features' ``info`` (see the module docstring).
+
+    The calibration is the file's, or with ``calibration_path=None`` the dataset's own feature ``info``;
+    it is checked as :func:`attach_calibration` checks it. ``new_repo_id`` defaults to
+    ``local/<new_root's name>``.
+    """
+    from lerobot.datasets.dataset_tools import modify_features, recompute_stats
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    root, new_root = Path(root), Path(new_root)
+    info_path = root / INFO_PATH
+    if not info_path.is_file():
+        raise CalibrationError(f"--root {root}: no {INFO_PATH} there, not a LeRobot dataset")
+    info = json.loads(info_path.read_text(encoding="utf-8"))
+    existing = sorted(key for key in info.get("features", {}) if is_calibration_key(key))
+    if existing:
+        raise CalibrationError(
+            f"--root {root}: expected a dataset without per-frame columns, it has {existing}"
+        )
+    if new_root.exists() and (not new_root.is_dir() or any(new_root.iterdir())):
+        raise CalibrationError(
+            f"--per-frame-columns: {new_root} already exists and is not an empty directory; refusing to "
+            f"overwrite it"
+        )
+    if calibration_path is None:
+        calibrations = _info_calibrations(info, skip)
+    else:
+        calibrations = load_calibration_file(calibration_path)
+    _, reports = plan_attachment(info, calibrations, volume_bounds, min_visible, distortion, skip, True)
+    if dry_run:
+        return reports
+
+    dataset = LeRobotDataset(f"local/{root.name}", root=root, video_backend="pyav")
+    frames = dataset.meta.total_frames
+    specs = calibration_column_features(report.key for report in reports)
+    columns: dict[str, tuple[np.ndarray, dict[str, Any]]] = {}
+    for report in reports:
+        for key, value in (
+            (extrinsics_key(report.key), extrinsics_column(report.calibration.T_cam_world)),
+            (intrinsics_key(report.key), intrinsics_column(report.calibration.K)),
+        ):
+            columns[key] = (np.tile(value, (frames, 1)), specs[key])
+    if new_root.exists():
+        new_root.rmdir()  # LeRobot creates it itself and refuses an existing one
+    try:
+        copy_dataset = modify_features(
+            dataset,
+            add_features=columns,
+            output_dir=new_root,
+            repo_id=new_repo_id or f"local/{new_root.name}",
+        )
+        recompute_stats(copy_dataset)  # the new columns' statistics, like a recorded dataset's
+        new_info_path = new_root / INFO_PATH
+        new_info = json.loads(new_info_path.read_text(encoding="utf-8"))
+        for feature in new_info["features"].values():
+            for key in (CALIBRATION_INFO_KEY, SOURCE_INFO_KEY):
+                (feature.get("info") or {}).pop(key, None)
+        _write_json_atomically(new_info, new_info_path)
+    except BaseException:
+        shutil.rmtree(new_root, ignore_errors=True)  # nothing half-written
+        raise
+    return reports
+
+
 def _check_readable(new_info: Mapping[str, Any], reports: Sequence[CameraReport]) -> None:
     """The new info must parse with LeRobot's own metadata class and give back every calibration."""
     from lerobot.datasets.utils import DatasetInfo
-
-    from lerobot_omnid.calibration.schema import calibration_from_feature_info
 
     DatasetInfo.from_dict(copy.deepcopy(dict(new_info)))
     for report in reports:
@@ -180,9 +291,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="omnid-attach-calibration",
         description="Validate a camera calibration file against a LeRobot dataset and attach it to the "
-        "dataset's image features (meta/info.json only; data and videos are not touched).",
+        "dataset's image features (meta/info.json only; data and videos are not touched), or write a copy of "
+        "the dataset with the calibration as per-frame columns (--per-frame-columns).",
     )
-    parser.add_argument("--calibration", type=Path, required=True, help="calibration file (JSON or YAML)")
+    parser.add_argument(
+        "--calibration",
+        type=Path,
+        help="calibration file (JSON or YAML); required unless --per-frame-columns, which then uses the "
+        "dataset's own",
+    )
     parser.add_argument("--root", type=Path, help="local dataset root (the folder holding meta/info.json)")
     parser.add_argument(
         "--repo-id", help="Hub dataset repo id, downloaded to LeRobot's cache when --root is not given"
@@ -223,11 +340,37 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--no-backup", action="store_true", help="do not keep meta/info.json.bak")
     parser.add_argument("--dry-run", action="store_true", help="validate and report; write nothing")
+    parser.add_argument(
+        "--per-frame-columns",
+        type=Path,
+        metavar="NEW_ROOT",
+        help="write a copy of the dataset here with every camera's calibration as constant per-frame columns "
+        "(observation.extrinsics.<cam>, observation.intrinsics.<cam>) and none in the feature info, so that "
+        "it merges with datasets of other rigs; the source is not touched",
+    )
+    parser.add_argument(
+        "--new-repo-id", help="repo id of the --per-frame-columns copy (default: local/<NEW_ROOT's name>)"
+    )
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.per_frame_columns is None:
+        if args.calibration is None:
+            parser.error(
+                "--calibration: expected a calibration file (or --per-frame-columns NEW_ROOT), got none"
+            )
+        if args.new_repo_id is not None:
+            parser.error(f"--new-repo-id: expected only with --per-frame-columns, got {args.new_repo_id!r}")
+    else:
+        for flag, given in (("--overwrite", args.overwrite), ("--no-backup", args.no_backup)):
+            if given:
+                parser.error(
+                    f"{flag}: --per-frame-columns writes a new dataset and never changes the source; "
+                    f"expected {flag} only without it"
+                )
     try:
         if not 0.0 <= args.min_visible <= 1.0:
             raise CalibrationError(f"--min-visible must be in [0, 1], got {args.min_visible}")
@@ -239,22 +382,43 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             volume_bounds = DEFAULT_VOLUME_BOUNDS
         root = resolve_root(args.root, args.repo_id, args.revision)
-        reports = attach_calibration(
-            root,
-            args.calibration,
-            volume_bounds=volume_bounds,
-            min_visible=args.min_visible,
-            distortion=args.distortion,
-            skip=args.skip_camera,
-            overwrite=args.overwrite,
-            backup=not args.no_backup,
-            dry_run=args.dry_run,
-        )
+        if args.per_frame_columns is not None:
+            reports = write_per_frame_columns(
+                root,
+                args.per_frame_columns,
+                args.calibration,
+                args.new_repo_id,
+                volume_bounds=volume_bounds,
+                min_visible=args.min_visible,
+                distortion=args.distortion,
+                skip=args.skip_camera,
+                dry_run=args.dry_run,
+            )
+        else:
+            reports = attach_calibration(
+                root,
+                args.calibration,
+                volume_bounds=volume_bounds,
+                min_visible=args.min_visible,
+                distortion=args.distortion,
+                skip=args.skip_camera,
+                overwrite=args.overwrite,
+                backup=not args.no_backup,
+                dry_run=args.dry_run,
+            )
     except CalibrationError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     for report in reports:
         print(report.line())
+    if args.per_frame_columns is not None:
+        written = (
+            "nothing written (dry run)"
+            if args.dry_run
+            else f"copy with per-frame columns: {args.per_frame_columns}"
+        )
+        print(f"checked the calibration of {len(reports)} camera(s) of {root}; {written}")
+        return 0
     info_path = root / INFO_PATH
     if args.dry_run:
         print(f"dry run: the calibration of {len(reports)} camera(s) is valid for {root}; nothing written")
