@@ -198,6 +198,14 @@ def look_at(eye_world: Tensor, target_world: Tensor, up_world: Tensor | None = N
     return cam_T_world
 
 
+def resize_intrinsics(pix_T_cam: Tensor, from_hw: tuple[int, int], to_hw: tuple[int, int]) -> Tensor:
+    """Intrinsics after resizing a whole image from ``from_hw`` to ``to_hw``: pixel centres stay at integers,
+    ``u' = (u + 0.5) * sx - 0.5``. A resize is the crop of :func:`crop_intrinsics` whose box starts at the
+    corner and spans ``from / to`` of the output. ``pix_T_cam``: (..., 3, 3)."""
+    box = pix_T_cam.new_tensor([0.0, 0.0, from_hw[1] / to_hw[1], from_hw[0] / to_hw[0]])
+    return crop_intrinsics(pix_T_cam, box.expand(*pix_T_cam.shape[:-2], 4), to_hw)
+
+
 def crop_theta(box: Tensor) -> Tensor:
     """``F.affine_grid`` matrices that cut ``box`` out of an image and stretch it over the whole output.
 

@@ -139,3 +139,115 @@ def test_checkpoint_saved_before_the_wings_still_loads(tmp_path):
     policy = OmniDPolicy.from_pretrained(ckpt, strict=True).eval()
     assert {k: list(v.shape) for k, v in policy.state_dict().items()} == shapes
     assert policy.select_action(observation(policy.config)).shape == (1, 10)
+
+
+def frame_columns(calib: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    """(16,) extrinsics and (9,) intrinsics columns of a calibration dict."""
+    return torch.tensor(calib["T_cam_world"]).flatten(), torch.tensor(calib["K"]).flatten()
+
+
+def per_frame_policy() -> OmniDPolicy:
+    """A policy whose cameras are calibrated per frame (no static calibration at all)."""
+    keys = [f"observation.images.{c}" for c in CAMS]
+    return OmniDPolicy(small_config(camera_calibration={}, frame_calibration=keys)).eval()
+
+
+def with_columns(batch: dict, calibs: list[dict[str, dict]], time_dim: bool) -> dict:
+    """``calibs[b][cam]``: sample b's calibration of each camera, the same for every step."""
+    T = 2
+    for cam in CAMS:
+        ext, K = zip(*(frame_columns(c[cam]) for c in calibs), strict=True)
+        ext, K = torch.stack(ext), torch.stack(K)
+        if time_dim:
+            ext, K = ext[:, None].expand(-1, T, -1), K[:, None].expand(-1, T, -1)
+        batch[f"observation.extrinsics.{cam}"], batch[f"observation.intrinsics.{cam}"] = ext, K
+    return batch
+
+
+def test_each_sample_gets_the_plane_of_its_own_rig():
+    policy = per_frame_policy()
+    rig_a = {cam: synthetic_calibration(cam, SIZE) for cam in CAMS}
+    rig_b = {cam: moved(cam) for cam in CAMS}
+    batch = with_columns(random_batch(policy.config, batch_size=2), [rig_a, rig_b], time_dim=True)
+    stacked = policy._stack_inputs(batch, time_dim=True)
+    with torch.no_grad():
+        mixed = policy._condition(stacked)
+        for b, rig in enumerate((rig_a, rig_b)):
+            static = OmniDPolicy(
+                small_config(camera_calibration={f"observation.images.{c}": rig[c] for c in CAMS})
+            )
+            static.load_state_dict(policy.state_dict())
+            alone = static.eval()._condition(
+                {k: v[b : b + 1] for k, v in static._stack_inputs(batch, True).items()}
+            )
+            assert torch.allclose(mixed[b], alone[0], atol=1e-5)
+    assert not torch.allclose(mixed[0], mixed[1], atol=1e-3)  # the two rigs do give different planes
+
+
+def test_a_moving_camera_uses_each_steps_own_pose():
+    policy = per_frame_policy()
+    batch = with_columns(
+        random_batch(policy.config, batch_size=1), [{c: synthetic_calibration(c, SIZE) for c in CAMS}], True
+    )
+    key = "observation.extrinsics.cam_c"
+    batch[key] = batch[key].clone()
+    batch[key][0, 1] = frame_columns(moved("cam_c"))[0]  # the camera moved between the two steps
+    pix_T_cam, cam_T_world = (
+        policy._stack_inputs(batch, time_dim=True)[k] for k in ("omnid.pix_T_cam", "omnid.cam_T_world")
+    )
+    assert pix_T_cam.shape == (1, 2, 2, 3, 3) and cam_T_world.shape == (1, 2, 2, 4, 4)
+    assert torch.equal(cam_T_world[0, 0, 1].flatten(), frame_columns(synthetic_calibration("cam_c", SIZE))[0])
+    assert torch.equal(cam_T_world[0, 1, 1].flatten(), frame_columns(moved("cam_c"))[0])
+    # select_action queues each step's calibration with its images.
+    policy.reset()
+    for step in range(2):
+        obs = observation(policy.config)
+        for cam in CAMS:
+            calib = moved(cam) if (cam == "cam_c" and step == 1) else synthetic_calibration(cam, SIZE)
+            ext, K = frame_columns(calib)
+            obs[f"observation.extrinsics.{cam}"], obs[f"observation.intrinsics.{cam}"] = ext[None], K[None]
+        policy.select_action(obs)
+    queued = torch.stack(list(policy._queues["omnid.cam_T_world"]), dim=1)
+    assert torch.equal(queued[0, 1, 1].flatten(), frame_columns(moved("cam_c"))[0])
+
+
+def test_missing_frame_columns_are_named():
+    policy = per_frame_policy()
+    obs = observation(policy.config)
+    with pytest.raises(KeyError, match=r"observation\.intrinsics\.cam_b` is missing .*frame_calibration"):
+        policy.select_action(obs)
+
+
+def test_dataset_columns_become_frame_calibration_not_state():
+    """``dataset_to_policy_features`` makes the columns STATE features; the config takes them out (so the
+    normaliser never rescales them) and reads those cameras per frame; the others keep their static one."""
+    from lerobot.utils.feature_utils import dataset_to_policy_features
+
+    from lerobot_omnid.calibration.frame_columns import calibration_column_features
+
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (STATE_DIM,), "names": None},
+        "action": {"dtype": "float32", "shape": (10,), "names": None},
+        **{
+            f"observation.images.{cam}": {
+                "dtype": "video",
+                "shape": (SIZE, SIZE, 3),
+                "names": ["height", "width", "channels"],
+                "info": {} if cam == "cam_c" else {"calibration": synthetic_calibration(cam, SIZE)},
+            }
+            for cam in CAMS
+        },
+        **calibration_column_features(["cam_c"]),
+    }
+    config = small_config()
+    config.input_features = {k: ft for k, ft in dataset_to_policy_features(features).items() if k != "action"}
+    assert "observation.extrinsics.cam_c" in config.input_features  # LeRobot's doing
+    config.set_dataset_feature_metadata(features)
+    assert config.frame_calibration == ["observation.images.cam_c"]
+    assert sorted(config.input_features) == [
+        "observation.images.cam_b",
+        "observation.images.cam_c",
+        "observation.state",
+    ]
+    assert list(config.camera_calibration) == ["observation.images.cam_b"]
+    OmniDPolicy(config)  # cam_c needs no static calibration

@@ -23,6 +23,8 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from lerobot_omnid.geometry import resize_intrinsics
+
 CALIBRATION_INFO_KEY = "calibration"
 """Key of the calibration dict inside a dataset feature's ``info``."""
 
@@ -143,14 +145,10 @@ class CameraCalibration:
             return self
         if height < 1 or width < 1:
             raise CalibrationError(f"resized: expected a positive (height, width), got {tuple(image_hw)}")
-        sy, sx = height / self.image_size[0], width / self.image_size[1]
-        (fx, s, cx), (_, fy, cy), _ = self.K
-        K = (
-            (fx * sx, s * sx, cx * sx + 0.5 * sx - 0.5),
-            (0.0, fy * sy, cy * sy + 0.5 * sy - 0.5),
-            (0.0, 0.0, 1.0),
+        K = resize_intrinsics(torch.tensor(self.K, dtype=torch.float64), self.image_size, (height, width))
+        return CameraCalibration(
+            tuple(tuple(row) for row in K.tolist()), self.T_cam_world, (height, width), self.distortion
         )
-        return CameraCalibration(K, self.T_cam_world, (height, width), self.distortion)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form, the one stored in dataset feature info and in config.json."""

@@ -9,6 +9,7 @@ from lerobot.configs import FeatureType, NormalizationMode, PreTrainedConfig
 from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
 from lerobot.utils.feature_utils import dataset_to_policy_features
 
+from lerobot_omnid.calibration.frame_columns import extrinsics_key, intrinsics_key, is_calibration_key
 from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.calibration.schema import (
     CALIBRATION_INFO_KEY,
@@ -49,6 +50,12 @@ class OmniDConfig(PreTrainedConfig):
             :class:`lerobot_omnid.calibration.schema.CameraCalibration` (K, T_cam_world, image_size).
             Copied from the dataset's feature info by ``set_dataset_feature_metadata``; saved in
             ``config.json``.
+        frame_calibration: Image feature keys whose calibration is read from every frame instead, from
+            the columns ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``
+            (:mod:`lerobot_omnid.calibration.frame_columns`), per sample and observation step: a wrist
+            camera, or data merged from several rigs. Set from the dataset when both columns of a used
+            camera exist (they then win over a static calibration in the feature info); the columns are
+            kept out of ``input_features``, so they are neither normalised nor part of the state.
         cameras: Which of the dataset's cameras the policy uses, by name ("cam_b") or feature key
             ("observation.images.cam_b"); None uses every image feature of the dataset.
         calibration_path: A calibration file (``lerobot_omnid.calibration.rig_file``) whose cameras override
@@ -138,6 +145,7 @@ class OmniDConfig(PreTrainedConfig):
         }
     )
     camera_calibration: dict[str, dict] = field(default_factory=dict)
+    frame_calibration: list[str] = field(default_factory=list)
     cameras: list[str] | None = None
     calibration_path: str | None = None
 
@@ -304,22 +312,32 @@ class OmniDConfig(PreTrainedConfig):
             if missing:
                 raise ValueError(f"`cameras`: {missing} not among the dataset's image features {image_keys}")
             image_keys = wanted
+        # Per-frame columns win over a static calibration; a camera needs one or the other.
+        self.frame_calibration = [
+            k
+            for k in image_keys
+            if extrinsics_key(k) in dataset_features and intrinsics_key(k) in dataset_features
+        ]
         # The "w/o OFG" ablation does not use calibration: keep whatever the dataset has.
-        # A calibration file given with this config overrides the dataset's calibration.
+        # A calibration file given with this config overrides the dataset's static calibration.
         from_file = self._calibration_overrides
         self.camera_calibration = {
             k: from_file[k]
             if k in from_file
             else calibration_from_feature_info(k, dataset_features[k]).to_dict()
             for k in image_keys
-            if self.use_ofg
+            if (self.use_ofg and k not in self.frame_calibration)
             or k in from_file
             or CALIBRATION_INFO_KEY in (dataset_features[k].get("info") or {})
         }
         if self.input_features:
             policy_features = dataset_to_policy_features(dataset_features)
             dataset_images = {k: policy_features[k] for k in image_keys}
-            others = {k: ft for k, ft in self.input_features.items() if ft.type is not FeatureType.VISUAL}
+            others = {
+                k: ft
+                for k, ft in self.input_features.items()
+                if ft.type is not FeatureType.VISUAL and not is_calibration_key(k)
+            }
             self.input_features = {**others, **dataset_images}
 
     def validate_features(self) -> None:
@@ -331,7 +349,7 @@ class OmniDConfig(PreTrainedConfig):
         for key, ft in self.image_features.items():
             if len(ft.shape) != 3 or ft.shape[0] != 3:
                 raise ValueError(f"{key}: expected an RGB image feature of shape (3, H, W), got {ft.shape}")
-            if self.use_ofg:
+            if self.use_ofg and key not in self.frame_calibration:
                 self.calibration(key)
         if not self.use_ofg:
             shapes = {ft.shape for ft in self.image_features.values()}

@@ -19,17 +19,26 @@ from lerobot.policies.utils import get_output_shape, populate_queues
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
+from lerobot_omnid.calibration.frame_columns import (
+    extrinsics_from_column,
+    extrinsics_key,
+    intrinsics_from_column,
+    intrinsics_key,
+)
 from lerobot_omnid.calibration.schema import (
     ASPECT_TOLERANCE,
     CalibrationError,
     CameraCalibration,
     camera_matrices,
 )
-from lerobot_omnid.geometry import crop_intrinsics, crop_theta
+from lerobot_omnid.geometry import crop_intrinsics, crop_theta, resize_intrinsics
 from lerobot_omnid.policy.backbone import ResNetFeatures
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.model_card import find_eval_results, omnid_card_section
 from lerobot_omnid.policy.omni_feature_generator import OFGOutput, OmniFeatureGenerator
+
+FRAME_MATRICES = ("omnid.pix_T_cam", "omnid.cam_T_world")
+"""Keys of the per-frame matrices among the stacked (and queued) inputs: (B, [T,] S, 3, 3) and 4x4."""
 
 
 def resize_images(images: Tensor, image_hw: tuple[int, int]) -> Tensor:
@@ -68,7 +77,8 @@ class OmniDPolicy(PreTrainedPolicy):
         self._matrices_key: tuple | None = None
         self._checked_sizes: tuple | None = None  # the per-camera image sizes last found consistent
         if config.use_ofg:
-            self._calibrations = {key: config.calibration(key) for key in self.camera_keys}
+            static = [key for key in self.camera_keys if key not in config.frame_calibration]
+            self._calibrations = {key: config.calibration(key) for key in static}
         self.reset()
 
     def generate_model_card(self, *args, cfg=None, **kwargs) -> ModelCard:
@@ -83,11 +93,9 @@ class OmniDPolicy(PreTrainedPolicy):
 
     def reset(self) -> None:
         """Clear observation and action queues. Called on ``env.reset()``."""
-        self._queues = {
-            OBS_STATE: deque(maxlen=self.config.n_obs_steps),
-            OBS_IMAGES: deque(maxlen=self.config.n_obs_steps),
-            ACTION: deque(maxlen=self.config.n_action_steps),
-        }
+        observed = (OBS_STATE, OBS_IMAGES, *(FRAME_MATRICES if self.config.frame_calibration else ()))
+        self._queues = {key: deque(maxlen=self.config.n_obs_steps) for key in observed}
+        self._queues[ACTION] = deque(maxlen=self.config.n_action_steps)
 
     @property
     def camera_keys(self) -> list[str]:
@@ -122,14 +130,19 @@ class OmniDPolicy(PreTrainedPolicy):
         """
         input_hw = tuple(self.config.resize_shape or image_hw)
         key = (tuple(self.camera_keys), input_hw)
+        S = len(self.camera_keys)
         if key != self._matrices_key:
-            pix_T_cam, cam_T_world = camera_matrices(
-                [self._calibration(k) for k in self.camera_keys], [input_hw] * len(self.camera_keys)
-            )
+            # Cameras calibrated per frame have no static matrices: identity placeholders, replaced by
+            # every frame's own in _stack_inputs.
+            static = [i for i, k in enumerate(self.camera_keys) if k not in self.config.frame_calibration]
+            pix_T_cam, cam_T_world = torch.eye(3).repeat(S, 1, 1), torch.eye(4).repeat(S, 1, 1)
+            if static:
+                pix_T_cam[static], cam_T_world[static] = camera_matrices(
+                    [self._calibration(self.camera_keys[i]) for i in static], [input_hw] * len(static)
+                )
             device = self.pix_T_cam.device
             self.pix_T_cam, self.cam_T_world = pix_T_cam.to(device), cam_T_world.to(device)
             self._matrices_key = key
-        S = len(self.camera_keys)
         return (
             self.pix_T_cam.expand(batch_size, S, 3, 3),
             self.cam_T_world.expand(batch_size, S, 4, 4),
@@ -168,7 +181,50 @@ class OmniDPolicy(PreTrainedPolicy):
                     f"All cameras must have one image size unless `resize_shape` is set, got {found}"
                 )
             images = [resize_images(img, tuple(self.config.resize_shape)) for img in images]
-        return {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
+        stacked = {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
+        if self.config.frame_calibration and self.config.use_ofg:
+            stacked.update(zip(FRAME_MATRICES, self._frame_matrices(batch, sizes), strict=True))
+        return stacked
+
+    def _frame_matrices(
+        self, batch: dict[str, Tensor], sizes: tuple[tuple[int, int], ...]
+    ) -> tuple[Tensor, Tensor]:
+        """Every frame's calibration: the columns of the cameras in ``config.frame_calibration``, the static
+        matrices for the others.
+
+        Args:
+            batch: with ``observation.extrinsics.<cam>`` (B, [T,] 16) and ``observation.intrinsics.<cam>``
+                (B, [T,] 9), K for that camera's image size in the batch.
+            sizes: each camera's image size in the batch.
+        Returns:
+            pix_T_cam (B, [T,] S, 3, 3) for the backbone's input size and cam_T_world (B, [T,] S, 4, 4).
+        """
+        input_hw = tuple(self.config.resize_shape or sizes[0])
+        state = batch[OBS_STATE]
+        lead = state.shape[:-1]  # B, [T]
+        static = self.camera_matrices(1, input_hw)  # 1, S, ...
+        pix_T_cam, cam_T_world = (m[0].expand(*lead, *m.shape[1:]).clone() for m in static)  # B, [T,] S, ...
+        for i, key in enumerate(self.camera_keys):
+            if key not in self.config.frame_calibration:
+                continue
+            columns = []
+            for column_key, size in ((intrinsics_key(key), 9), (extrinsics_key(key), 16)):
+                if column_key not in batch:
+                    raise KeyError(
+                        f"`{column_key}` is missing from the batch: {key} is calibrated per frame "
+                        f"(`frame_calibration`); keys: {sorted(batch)}"
+                    )
+                value = batch[column_key]
+                if tuple(value.shape) != (*lead, size) or not torch.isfinite(value).all():
+                    raise ValueError(
+                        f"`{column_key}`: expected finite values of shape {(*lead, size)}, got "
+                        f"{tuple(value.shape)}"
+                    )
+                columns.append(value.to(pix_T_cam.dtype))
+            K = intrinsics_from_column(columns[0])
+            pix_T_cam[..., i, :, :] = resize_intrinsics(K, sizes[i], input_hw)
+            cam_T_world[..., i, :, :] = extrinsics_from_column(columns[1])
+        return pix_T_cam, cam_T_world
 
     def _check_image_sizes(self, sizes: tuple[tuple[int, int], ...]) -> None:
         """Each camera's images must be its calibrated image resized uniformly, unless they were stretched.
@@ -179,6 +235,8 @@ class OmniDPolicy(PreTrainedPolicy):
         if sizes == self._checked_sizes or self.config.images_stretched:
             return
         for key, (h, w) in zip(self.camera_keys, sizes, strict=True):
+            if key in self.config.frame_calibration:
+                continue  # each frame's K is for the image that comes with it
             calib_h, calib_w = self._calibration(key).image_size
             if abs((h / calib_h) / (w / calib_w) - 1) > ASPECT_TOLERANCE:
                 raise CalibrationError(
@@ -193,8 +251,10 @@ class OmniDPolicy(PreTrainedPolicy):
         images = stacked[OBS_IMAGES]
         if not self.config.use_ofg:
             return self.model.global_condition(images, stacked[OBS_STATE], None, None)
-        image_hw = tuple(images.shape[-2:])
-        pix_T_cam, cam_T_world = self.camera_matrices(images.shape[0], image_hw)
+        if FRAME_MATRICES[0] in stacked:
+            pix_T_cam, cam_T_world = (stacked[k] for k in FRAME_MATRICES)  # B, T, S, ...
+        else:
+            pix_T_cam, cam_T_world = self.camera_matrices(images.shape[0], tuple(images.shape[-2:]))
         if augment and self.config.random_crop_min_scale < 1:
             images, pix_T_cam = self._random_crop(images, pix_T_cam)
         return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world)
@@ -206,7 +266,7 @@ class OmniDPolicy(PreTrainedPolicy):
 
         Args:
             images: (B, T, S, 3, H, W).
-            pix_T_cam: (B, S, 3, 3) for the backbone's input size.
+            pix_T_cam: (B, S, 3, 3), or (B, T, S, 3, 3) calibrated per frame, for the backbone's input size.
         """
         B, T, S = images.shape[:3]
         scale = torch.empty(B, S, device=images.device).uniform_(self.config.random_crop_min_scale, 1.0)
@@ -217,6 +277,8 @@ class OmniDPolicy(PreTrainedPolicy):
         grid = F.affine_grid(theta.reshape(-1, 2, 3), list(x.shape), align_corners=False)
         x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
         input_hw = tuple(self.config.resize_shape or images.shape[-2:])
+        if pix_T_cam.ndim == 5:
+            box = box[:, None]  # B, 1, S, 4: one crop for every observation step
         return x.view_as(images), crop_intrinsics(pix_T_cam, box, input_hw)
 
     @torch.no_grad()
@@ -224,7 +286,7 @@ class OmniDPolicy(PreTrainedPolicy):
         """Predict ``n_action_steps`` actions (B, n_action_steps, Da) from the queued observations, or from
         a batch with a time dimension when the queues are empty (offline use)."""
         if len(self._queues[OBS_STATE]) > 0:
-            stacked = {k: torch.stack(list(self._queues[k]), dim=1) for k in (OBS_STATE, OBS_IMAGES)}
+            stacked = {k: torch.stack(list(q), dim=1) for k, q in self._queues.items() if k != ACTION}
         else:
             stacked = self._stack_inputs(batch, time_dim=True)
         return self.model.generate_actions(self._condition(stacked), noise=noise)
@@ -309,8 +371,10 @@ class OmniDModel(nn.Module):
         Args:
             images: (B, T, S, 3, H, W) in [0, 1].
             pix_T_cam: (B, S, 3, 3) intrinsics per sample and camera for the backbone's input size
-                (``config.resize_shape``, else (H, W)); None without the OFG.
-            cam_T_world: (B, S, 4, 4) extrinsics per sample and camera; None without the OFG.
+                (``config.resize_shape``, else (H, W)), or (B, T, S, 3, 3) per observation step; None
+                without the OFG.
+            cam_T_world: (B, S, 4, 4) extrinsics per sample and camera, or (B, T, S, 4, 4); None without
+                the OFG.
         Returns:
             (B, T, image_cond_dim) and, with the OFG, its output for the (B*T) flattened steps.
         """
@@ -323,13 +387,14 @@ class OmniDModel(nn.Module):
         if not self.config.use_ofg:
             return self.pool(features).view(B, T, -1), None
         features = features.unflatten(0, (B * T, S))  # B*T, S, C, h, w
-        # The calibration is the same for every observation step: B, S, ... -> B*T, S, ...
-        out = self.ofg(
-            features,
-            pix_T_cam.repeat_interleave(T, dim=0),
-            cam_T_world.repeat_interleave(T, dim=0),
-            image_hw,
-        )
+        if pix_T_cam.ndim == 5:  # per frame: B, T, S, ... -> B*T, S, ...
+            pix_T_cam, cam_T_world = pix_T_cam.flatten(0, 1), cam_T_world.flatten(0, 1)
+        else:  # the same for every observation step: B, S, ... -> B*T, S, ...
+            pix_T_cam, cam_T_world = (
+                pix_T_cam.repeat_interleave(T, dim=0),
+                cam_T_world.repeat_interleave(T, dim=0),
+            )
+        out = self.ofg(features, pix_T_cam, cam_T_world, image_hw)
         return out.condition.view(B, T, -1), out
 
     def global_condition(
