@@ -240,3 +240,44 @@ def crop_intrinsics(pix_T_cam: Tensor, box: Tensor, image_hw: tuple[int, int]) -
     K[..., :2, :] = pix_T_cam[..., :2, :] * scale[..., :, None]
     K[..., :2, 2] = (pix_T_cam[..., :2, 2] + 0.5 - shift) * scale - 0.5
     return K
+
+
+def axis_angle_to_matrix(axis: Tensor, angle: Tensor) -> Tensor:
+    """Rodrigues: rotation by ``angle`` (radians, (...,)) about the unit ``axis`` (..., 3) -> (..., 3, 3)."""
+    x, y, z = axis.unbind(-1)
+    zero = torch.zeros_like(x)
+    skew = torch.stack([zero, -z, y, z, zero, -x, -y, x, zero], dim=-1).unflatten(-1, (3, 3))
+    eye = torch.eye(3, dtype=axis.dtype, device=axis.device).expand_as(skew)
+    s, c = angle.sin()[..., None, None], angle.cos()[..., None, None]
+    return eye + s * skew + (1 - c) * (skew @ skew)
+
+
+def random_unit_vectors(shape: tuple[int, ...], generator: torch.Generator | None = None, **like) -> Tensor:
+    """(*shape, 3) directions uniform on the sphere."""
+    v = torch.randn(*shape, 3, generator=generator, **like)
+    return v / v.norm(dim=-1, keepdim=True).clamp(min=1e-12)
+
+
+def perturb_extrinsics(cam_T_world: Tensor, rotation: Tensor, translation_m: Tensor) -> Tensor:
+    """A camera believed elsewhere: ``[R | t] @ cam_T_world``, i.e. turned by ``rotation`` about its own
+    optical centre and then moved by ``translation_m`` in its own frame (the centre moves by that length).
+
+    Args:
+        cam_T_world: (..., 4, 4).
+        rotation: (..., 3, 3).
+        translation_m: (..., 3) metres, in the camera frame.
+    """
+    delta = torch.eye(4, dtype=cam_T_world.dtype, device=cam_T_world.device).expand_as(cam_T_world).clone()
+    delta[..., :3, :3] = rotation
+    delta[..., :3, 3] = translation_m
+    return delta @ cam_T_world
+
+
+def perturb_intrinsics(pix_T_cam: Tensor, focal_scale: Tensor, principal_shift_px: Tensor) -> Tensor:
+    """``fx, fy`` (and the skew) times ``focal_scale`` (...,), the principal point moved by
+    ``principal_shift_px`` (..., 2). ``pix_T_cam``: (..., 3, 3)."""
+    K = pix_T_cam.clone()
+    K[..., 0, :2] = pix_T_cam[..., 0, :2] * focal_scale[..., None]
+    K[..., 1, 1] = pix_T_cam[..., 1, 1] * focal_scale
+    K[..., :2, 2] = pix_T_cam[..., :2, 2] + principal_shift_px
+    return K

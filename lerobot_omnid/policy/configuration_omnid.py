@@ -88,6 +88,18 @@ class OmniDConfig(PreTrainedConfig):
             sample's K is moved with it. 1.0 (default) disables it. Use this instead of LeRobot's
             dataset transforms ``RandomAffine`` / crops, which move the images but not K (LeRobot's
             photometric transforms, e.g. ColorJitter, are fine).
+        calibration_noise_rotation_deg, calibration_noise_translation_mm: Training-time extrinsics noise
+            (0: off): per sample and camera (the same for all observation steps) the camera is believed
+            turned about its optical centre by a rotation vector with this standard deviation per axis
+            (degrees) and moved by a translation with this standard deviation per axis (millimetres, camera
+            frame), before the OFG projects the anchors. The scene and images are unchanged: the policy
+            learns to tolerate calibration error.
+        calibration_noise_focal_pct, calibration_noise_principal_px: Training-time intrinsics noise (0:
+            off): focal lengths scaled by 1 + N(0, pct / 100), principal point moved by N(0, px) pixels of
+            the backbone's input, per sample and camera.
+        camera_dropout: Training-time probability of dropping each camera of a sample (its samples are
+            masked out of the attention; at least one camera is always kept), so the fusion learns to work
+            with whatever cameras are there. 0: off.
         use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
             concatenated in camera order instead of the 3D feature (then the cameras are fixed).
         volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
@@ -158,6 +170,11 @@ class OmniDConfig(PreTrainedConfig):
     resize_shape: tuple[int, int] | None = None
     images_stretched: bool = False
     random_crop_min_scale: float = 1.0
+    calibration_noise_rotation_deg: float = 0.0
+    calibration_noise_translation_mm: float = 0.0
+    calibration_noise_focal_pct: float = 0.0
+    calibration_noise_principal_px: float = 0.0
+    camera_dropout: float = 0.0
 
     # Omni-Feature Generator.
     use_ofg: bool = True
@@ -246,6 +263,16 @@ class OmniDConfig(PreTrainedConfig):
                 "`random_crop_min_scale`: expected a fraction in (0, 1] (1: no crop), "
                 f"got {self.random_crop_min_scale}"
             )
+        for name in (
+            "calibration_noise_rotation_deg",
+            "calibration_noise_translation_mm",
+            "calibration_noise_focal_pct",
+            "calibration_noise_principal_px",
+        ):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"`{name}`: expected a standard deviation >= 0, got {getattr(self, name)}")
+        if not 0 <= self.camera_dropout < 1:
+            raise ValueError(f"`camera_dropout`: expected a probability in [0, 1), got {self.camera_dropout}")
         self.volume_bounds = tuple(tuple(float(v) for v in b) for b in self.volume_bounds)
         self.volume_shape = tuple(int(n) for n in self.volume_shape)
         try:

@@ -5,6 +5,7 @@ Shape legend: B batch, T observation steps, S cameras, H W image, Da action dim,
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping
 
@@ -31,7 +32,14 @@ from lerobot_omnid.calibration.schema import (
     CameraCalibration,
     camera_matrices,
 )
-from lerobot_omnid.geometry import crop_intrinsics, crop_theta, resize_intrinsics
+from lerobot_omnid.geometry import (
+    axis_angle_to_matrix,
+    crop_intrinsics,
+    crop_theta,
+    perturb_extrinsics,
+    perturb_intrinsics,
+    resize_intrinsics,
+)
 from lerobot_omnid.policy.backbone import ResNetFeatures
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.model_card import find_eval_results, omnid_card_section
@@ -39,6 +47,13 @@ from lerobot_omnid.policy.omni_feature_generator import OFGOutput, OmniFeatureGe
 
 FRAME_MATRICES = ("omnid.pix_T_cam", "omnid.cam_T_world")
 """Keys of the per-frame matrices among the stacked (and queued) inputs: (B, [T,] S, 3, 3) and 4x4."""
+
+
+def camera_dropout_mask(batch_size: int, num_cameras: int, p: float, device: torch.device) -> Tensor:
+    """(B, S) bool: each camera kept with probability 1 - p, and at least one (a random one) per sample."""
+    keep = torch.rand(batch_size, num_cameras, device=device) >= p
+    one = F.one_hot(torch.randint(num_cameras, (batch_size,), device=device), num_cameras)
+    return keep | one.bool()
 
 
 def resize_images(images: Tensor, image_hw: tuple[int, int]) -> Tensor:
@@ -255,9 +270,34 @@ class OmniDPolicy(PreTrainedPolicy):
             pix_T_cam, cam_T_world = (stacked[k] for k in FRAME_MATRICES)  # B, T, S, ...
         else:
             pix_T_cam, cam_T_world = self.camera_matrices(images.shape[0], tuple(images.shape[-2:]))
-        if augment and self.config.random_crop_min_scale < 1:
-            images, pix_T_cam = self._random_crop(images, pix_T_cam)
-        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world)
+        camera_mask = None
+        if augment:
+            if self.config.random_crop_min_scale < 1:
+                images, pix_T_cam = self._random_crop(images, pix_T_cam)
+            pix_T_cam, cam_T_world = self._calibration_noise(pix_T_cam, cam_T_world)
+            if self.config.camera_dropout > 0:
+                B, S = images.shape[0], images.shape[2]  # images: B, T, S, 3, H, W
+                camera_mask = camera_dropout_mask(B, S, self.config.camera_dropout, images.device)
+        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world, camera_mask)
+
+    def _calibration_noise(self, pix_T_cam: Tensor, cam_T_world: Tensor) -> tuple[Tensor, Tensor]:
+        """The training-time calibration noise of the config, per sample and camera (every observation
+        step of a sample gets the same): pix_T_cam (B, [T,] S, 3, 3), cam_T_world (B, [T,] S, 4, 4)."""
+        c = self.config
+        B, S = cam_T_world.shape[0], cam_T_world.shape[-3]
+        like = {"dtype": cam_T_world.dtype, "device": cam_T_world.device}
+        per_step = (slice(None), None) if cam_T_world.ndim == 5 else (slice(None),)  # broadcast over T
+        if c.calibration_noise_rotation_deg > 0 or c.calibration_noise_translation_mm > 0:
+            rotvec = torch.randn(B, S, 3, **like) * math.radians(c.calibration_noise_rotation_deg)
+            angle = rotvec.norm(dim=-1)
+            rotation = axis_angle_to_matrix(rotvec / angle.clamp(min=1e-12)[..., None], angle)
+            shift = torch.randn(B, S, 3, **like) * (c.calibration_noise_translation_mm / 1000)
+            cam_T_world = perturb_extrinsics(cam_T_world, rotation[per_step], shift[per_step])
+        if c.calibration_noise_focal_pct > 0 or c.calibration_noise_principal_px > 0:
+            scale = 1 + torch.randn(B, S, **like) * (c.calibration_noise_focal_pct / 100)
+            shift = torch.randn(B, S, 2, **like) * c.calibration_noise_principal_px
+            pix_T_cam = perturb_intrinsics(pix_T_cam, scale[per_step], shift[per_step])
+        return pix_T_cam, cam_T_world
 
     def _random_crop(self, images: Tensor, pix_T_cam: Tensor) -> tuple[Tensor, Tensor]:
         """Geometric augmentation that keeps the calibration: per sample and camera (the same for every
@@ -364,7 +404,11 @@ class OmniDModel(nn.Module):
         self.num_inference_steps = config.num_inference_steps or config.num_train_timesteps
 
     def encode_images(
-        self, images: Tensor, pix_T_cam: Tensor | None, cam_T_world: Tensor | None
+        self,
+        images: Tensor,
+        pix_T_cam: Tensor | None,
+        cam_T_world: Tensor | None,
+        camera_mask: Tensor | None = None,
     ) -> tuple[Tensor, OFGOutput | None]:
         """Image condition of each observation step.
 
@@ -375,6 +419,7 @@ class OmniDModel(nn.Module):
                 without the OFG.
             cam_T_world: (B, S, 4, 4) extrinsics per sample and camera, or (B, T, S, 4, 4); None without
                 the OFG.
+            camera_mask: (B, S) bool, False for cameras left out of the fusion (camera dropout).
         Returns:
             (B, T, image_cond_dim) and, with the OFG, its output for the (B*T) flattened steps.
         """
@@ -394,14 +439,21 @@ class OmniDModel(nn.Module):
                 pix_T_cam.repeat_interleave(T, dim=0),
                 cam_T_world.repeat_interleave(T, dim=0),
             )
-        out = self.ofg(features, pix_T_cam, cam_T_world, image_hw)
+        if camera_mask is not None:
+            camera_mask = camera_mask.repeat_interleave(T, dim=0)
+        out = self.ofg(features, pix_T_cam, cam_T_world, image_hw, camera_mask)
         return out.condition.view(B, T, -1), out
 
     def global_condition(
-        self, images: Tensor, state: Tensor, pix_T_cam: Tensor | None, cam_T_world: Tensor | None
+        self,
+        images: Tensor,
+        state: Tensor,
+        pix_T_cam: Tensor | None,
+        cam_T_world: Tensor | None,
+        camera_mask: Tensor | None = None,
     ) -> Tensor:
         """images (B, T, S, 3, H, W), state (B, T, Ds) -> (B, global_cond_dim)."""
-        image_cond, _ = self.encode_images(images, pix_T_cam, cam_T_world)
+        image_cond, _ = self.encode_images(images, pix_T_cam, cam_T_world, camera_mask)
         return torch.cat([image_cond, state], dim=-1).flatten(1)
 
     def generate_actions(self, global_cond: Tensor, noise: Tensor | None = None) -> Tensor:

@@ -12,6 +12,7 @@ visible (camera, anchor, point) triples, so any number and subset of cameras wor
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import torch
@@ -281,7 +282,12 @@ class OmniFeatureGenerator(nn.Module):
             self.out_dim = 2 * config.compressed_channels
 
     def forward(
-        self, feature_maps: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor, image_hw: tuple[int, int]
+        self,
+        feature_maps: Tensor,
+        pix_T_cam: Tensor,
+        cam_T_world: Tensor,
+        image_hw: tuple[int, int],
+        camera_mask: Tensor | None = None,
     ) -> OFGOutput:
         """
         Args:
@@ -289,9 +295,13 @@ class OmniFeatureGenerator(nn.Module):
             pix_T_cam: (B, S, 3, 3) intrinsics for the backbone's input images of ``image_hw``.
             cam_T_world: (B, S, 4, 4) extrinsics.
             image_hw: (height, width) of the backbone's input images.
+            camera_mask: (B, S) bool, False for a camera to leave out (as if it saw none of the volume).
         """
         B, S = feature_maps.shape[:2]
         geometry = camera_geometry(self.anchors_world, pix_T_cam.float(), cam_T_world.float(), image_hw)
+        if camera_mask is not None:
+            visible = geometry.anchor_visible & camera_mask[:, :, None, None]
+            geometry = dataclasses.replace(geometry, anchor_visible=visible)
         # B, S, C, H, W -> B*S, C, H, W -> B*S, D, H, W -> B, S, D, H, W
         features = self.input_proj(feature_maps.flatten(0, 1)).unflatten(0, (B, S))
         query_pos = self.query_pos(self.plane_coords)  # Q, D

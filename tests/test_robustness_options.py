@@ -1,0 +1,120 @@
+"""Training-time robustness options: calibration noise (the perturbation maths) and camera dropout."""
+
+import math
+
+import pytest
+import torch
+from omnid_testing import random_batch, tiny_config
+
+from lerobot_omnid.geometry import (
+    axis_angle_to_matrix,
+    camera_centers_world,
+    perturb_extrinsics,
+    perturb_intrinsics,
+    random_unit_vectors,
+)
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy, camera_dropout_mask
+
+
+def rotation_angle_deg(R: torch.Tensor) -> torch.Tensor:
+    return torch.rad2deg(torch.arccos(((R.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1, 1)))
+
+
+def test_rotation_has_the_requested_angle_and_is_proper():
+    axes = random_unit_vectors((50,), generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    angles = torch.linspace(0.0, 3.0, 50, dtype=torch.float64)
+    R = axis_angle_to_matrix(axes, angles)
+    assert torch.allclose(
+        R @ R.transpose(-1, -2), torch.eye(3, dtype=torch.float64).expand(50, 3, 3), atol=1e-12
+    )
+    assert torch.allclose(torch.linalg.det(R), torch.ones(50, dtype=torch.float64))
+    assert torch.allclose(torch.deg2rad(rotation_angle_deg(R)), angles, atol=1e-6)
+    assert torch.allclose((R @ axes[..., None])[..., 0], axes, atol=1e-12)  # the axis is fixed
+
+
+def test_perturbation_of_size_zero_changes_nothing_and_sizes_are_exact():
+    cam_T_world = torch.tensor(tiny_config().camera_calibration["observation.images.cam_b"]["T_cam_world"])
+    K = torch.tensor(tiny_config().camera_calibration["observation.images.cam_b"]["K"])
+    same = perturb_extrinsics(cam_T_world, torch.eye(3), torch.zeros(3))
+    assert torch.equal(same, cam_T_world)
+    assert torch.equal(perturb_intrinsics(K, torch.tensor(1.0), torch.zeros(2)), K)
+    # 2 cm in the camera frame moves the optical centre by 2 cm; a pure rotation keeps it.
+    moved = perturb_extrinsics(cam_T_world, torch.eye(3), torch.tensor([0.0, 0.012, 0.016]))
+    shift = camera_centers_world(moved) - camera_centers_world(cam_T_world)
+    assert shift.norm().item() == pytest.approx(0.02, abs=1e-6)
+    turned = perturb_extrinsics(
+        cam_T_world, axis_angle_to_matrix(torch.tensor([0.0, 1.0, 0.0]), torch.tensor(0.1)), torch.zeros(3)
+    )
+    assert torch.allclose(camera_centers_world(turned), camera_centers_world(cam_T_world), atol=1e-6)
+    doubled = perturb_intrinsics(K, torch.tensor(2.0), torch.tensor([3.0, -1.0]))
+    assert doubled[0, 0] == 2 * K[0, 0] and doubled[1, 1] == 2 * K[1, 1]
+    assert doubled[0, 2] == K[0, 2] + 3 and doubled[1, 2] == K[1, 2] - 1
+
+
+NOISE = {
+    "calibration_noise_rotation_deg": 2.0,
+    "calibration_noise_translation_mm": 20.0,
+    "calibration_noise_focal_pct": 2.0,
+    "calibration_noise_principal_px": 1.0,
+}
+
+
+def test_calibration_noise_is_per_sample_seeded_and_off_by_default():
+    policy = OmniDPolicy(tiny_config(**NOISE))
+    pix_T_cam, cam_T_world = policy.camera_matrices(3, (64, 64))
+    torch.manual_seed(5)
+    K1, T1 = policy._calibration_noise(pix_T_cam, cam_T_world)
+    torch.manual_seed(5)
+    K2, T2 = policy._calibration_noise(pix_T_cam, cam_T_world)
+    assert torch.equal(K1, K2) and torch.equal(T1, T2)  # seeded by torch's RNG (LeRobot seeds it)
+    assert not torch.allclose(T1[0], T1[1]) and not torch.allclose(K1[0], K1[1])  # per sample
+    assert not torch.allclose(T1[0, 0], T1[0, 1])  # per camera
+    # Per frame (B, T, S, ...): every observation step of a sample gets the same perturbation.
+    K5, T5 = policy._calibration_noise(
+        pix_T_cam[:, None].expand(-1, 2, -1, -1, -1), cam_T_world[:, None].expand(-1, 2, -1, -1, -1)
+    )
+    assert torch.equal(T5[:, 0], T5[:, 1]) and torch.equal(K5[:, 0], K5[:, 1])
+    # Off by default: the matrices pass through, and training uses it only in train mode.
+    quiet = OmniDPolicy(tiny_config())
+    K0, T0 = quiet._calibration_noise(pix_T_cam, cam_T_world)
+    assert torch.equal(K0, pix_T_cam) and torch.equal(T0, cam_T_world)
+    rotation = T1[..., :3, :3] @ cam_T_world[..., :3, :3].transpose(-1, -2)
+    assert 0 < rotation_angle_deg(rotation).mean() < 10
+
+
+def test_camera_dropout_keeps_one_camera_and_training_stays_finite():
+    mask = camera_dropout_mask(500, 4, 0.9, torch.device("cpu"))
+    assert mask.any(dim=1).all()
+    assert 0.05 < mask.float().mean() < 0.5  # most cameras dropped at p = 0.9
+    assert not camera_dropout_mask(10, 4, 0.0, torch.device("cpu")).logical_not().any()
+    policy = OmniDPolicy(tiny_config(camera_dropout=0.5, **NOISE)).train()
+    loss, _ = policy.forward(random_batch(policy.config))
+    assert torch.isfinite(loss)
+    loss.backward()
+
+
+def test_dropped_camera_is_left_out_of_the_plane():
+    policy = OmniDPolicy(tiny_config()).eval()
+    images = torch.rand(1, 1, 4, 3, 64, 64)
+    pix_T_cam, cam_T_world = policy.camera_matrices(1, (64, 64))
+    keep_all = torch.ones(1, 4, dtype=torch.bool)
+    drop_b = torch.tensor([[False, True, True, True]])
+    with torch.no_grad():
+        _, full = policy.model.encode_images(images, pix_T_cam, cam_T_world, keep_all)
+        _, without = policy.model.encode_images(images, pix_T_cam, cam_T_world, drop_b)
+        other = images.clone()
+        other[:, :, 0] = torch.rand(1, 1, 3, 64, 64)  # camera B's image changes: no effect once dropped
+        _, without_other = policy.model.encode_images(other, pix_T_cam, cam_T_world, drop_b)
+    assert not torch.allclose(full.plane, without.plane)
+    assert torch.allclose(without.plane, without_other.plane, atol=1e-6)
+    assert not without.attention_weights[:, 0].any()
+
+
+def test_noise_options_are_validated():
+    with pytest.raises(
+        ValueError, match="`calibration_noise_rotation_deg`: expected a standard deviation >= 0"
+    ):
+        tiny_config(calibration_noise_rotation_deg=-1.0)
+    with pytest.raises(ValueError, match=r"`camera_dropout`: expected a probability in \[0, 1\)"):
+        tiny_config(camera_dropout=1.0)
+    assert math.isclose(tiny_config().camera_dropout, 0.0)
