@@ -24,8 +24,8 @@ RIG="$OUT/sim_rig.yaml"
 SIM_CHECKPOINT="$OUT/train_sim/checkpoints/last/pretrained_model"
 cam() { echo "{source: $1, width: $IMAGE_SIZE, height: $IMAGE_SIZE, fps: 10}"; }
 # OmniD at the benchmark's CPU size (the `mini` profile, docs/benchmark.md) on top of the other examples'
-# flags: synchronous deployment waits for every new action chunk, about 0.6 s on one CPU core at 64 px at
-# this size and 7-20 s at the other examples' (benchmarks/bench_select_action.py, docs/real_robot.md).
+# flags: synchronous deployment waits for every new action chunk, 0.6 s on one CPU core at 64 px at this
+# size and 9 s at the other examples' 128 px size (benchmarks/bench_select_action.py, docs/real_robot.md).
 CPU_SIZE_FLAGS=(
   --policy.volume_shape="[16,20,8]" --policy.d_model=64 --policy.num_layers=2 --policy.checkpoint_sampling=false
   --policy.plane_readout=keypoints --policy.compressed_channels=16 --policy.down_dims="[128,256,512]"
