@@ -23,6 +23,20 @@ SYNTHETIC_EYES = {
 WORKSPACE_CENTRE = (0.5, 0.0, 0.0)
 STATE_DIM = 10
 ACTION_DIM = 10
+TINY_POLICY_FLAGS = [  # `lerobot-train` options of a CPU-tiny OmniD
+    "--policy.type=omnid",
+    "--policy.device=cpu",
+    "--policy.push_to_hub=false",
+    "--policy.volume_bounds=[[0.2,0.8],[-0.3,0.3],[0.0,0.3]]",
+    "--policy.volume_shape=[8,8,4]",
+    "--policy.d_model=32",
+    "--policy.num_heads=2",
+    "--policy.num_layers=1",
+    "--policy.down_dims=[32,64]",
+    "--policy.backbone_layer=3",
+    "--policy.noise_scheduler_type=DDIM",
+    "--policy.num_inference_steps=2",
+]
 
 
 def synthetic_calibration(cam: str, size: int = 64, target=WORKSPACE_CENTRE) -> dict:

@@ -4,6 +4,7 @@ with LeRobot's own ``lerobot-edit-dataset``, which refuses the same datasets rec
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +17,7 @@ import pytest
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.scripts.lerobot_edit_dataset import edit_dataset
+from omnid_testing import TINY_POLICY_FLAGS
 
 from lerobot_omnid.calibration.frame_columns import (
     EXTRINSICS_NAMES,
@@ -28,6 +30,7 @@ from lerobot_omnid.calibration.frame_columns import (
 )
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
 from lerobot_omnid.env_config import OmniDEnvConfig
+from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 from lerobot_omnid.record import record_dataset
 
 SIZE = 32
@@ -181,3 +184,24 @@ def test_console_commands_record_two_rigs_and_merge(tmp_path):
     assert merged.num_episodes == 2
     first, last = merged[0], merged[len(merged) - 1]
     assert not np.array_equal(first[extrinsics_key("cam_c")], last[extrinsics_key("cam_c")])
+
+    # One OmniD model learns from both rigs: lerobot-train reads every frame's calibration from the columns.
+    out = tmp_path / "train"
+    train = [
+        str(bin_dir / "lerobot-train"),
+        "--dataset.repo_id=local/merged",
+        f"--dataset.root={tmp_path / 'm'}",
+    ]
+    train += ["--dataset.video_backend=pyav", *TINY_POLICY_FLAGS, "--steps=2", "--batch_size=2"]
+    train += ["--num_workers=0", "--save_freq=2", f"--output_dir={out}", "--wandb.enable=false"]
+    proc = subprocess.run(train, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    checkpoint = out / "checkpoints" / "last" / "pretrained_model"
+    config = json.loads((checkpoint / "config.json").read_text())
+    keys = ["observation.images.cam_c", "observation.images.cam_wrist"]
+    assert config["frame_calibration"] == keys and config["camera_calibration"] == {}
+    assert sorted(config["input_features"]) == [*keys, "observation.state"]  # the columns are not state
+    policy = OmniDPolicy.from_pretrained(checkpoint).eval()
+    obs = {k: v[None] for k, v in last.items() if k.startswith("observation.") and k != "observation.state"}
+    obs["observation.state"] = last["observation.state"][None]
+    assert policy.select_action(obs).shape == (1, last["action"].shape[0])
