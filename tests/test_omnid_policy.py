@@ -342,3 +342,29 @@ def test_resnet101_backbone_for_the_ablation():
     assert policy.model.backbone.out_channels == 1024  # layer3 of a Bottleneck ResNet
     loss, _ = policy.forward(random_batch(policy.config, batch_size=1))
     assert torch.isfinite(loss)
+
+
+def test_fuse_last_step_only_encodes_one_step_and_keeps_both_states():
+    policy = OmniDPolicy(tiny_config(fuse_last_step_only=True))
+    full = OmniDPolicy(tiny_config())
+    image_dim = policy.model.ofg.out_dim
+    assert policy.model.global_cond_dim == image_dim + STATE_DIM * 2
+    assert full.model.global_cond_dim == (image_dim + STATE_DIM) * 2
+    seen = []
+    policy.model.backbone.register_forward_hook(lambda m, i, o: seen.append(i[0].shape[0]))
+    batch = random_batch(policy.config, batch_size=2)
+    loss, _ = policy.forward(batch)
+    loss.backward()
+    assert seen == [2 * 4]  # B * S images, one observation step
+    # The earlier step's images do not matter, its state does.
+    policy.eval()
+    stacked = policy._stack_inputs(batch, time_dim=True)
+    with torch.no_grad():
+        cond = policy._condition(stacked)
+        other = {k: v.clone() for k, v in stacked.items()}
+        other["observation.images"][:, 0] = torch.rand_like(other["observation.images"][:, 0])
+        assert torch.equal(policy._condition(other), cond)
+        other["observation.state"][:, 0] += 1.0
+        assert not torch.equal(policy._condition(other), cond)
+    obs = observation(policy.config)
+    assert policy.select_action(obs).shape == (1, ACTION_DIM)

@@ -100,6 +100,9 @@ class OmniDConfig(PreTrainedConfig):
         camera_dropout: Training-time probability of dropping each camera of a sample (its samples are
             masked out of the attention; at least one camera is always kept), so the fusion learns to work
             with whatever cameras are there. 0: off.
+        fuse_last_step_only: Only the last observation step's images go through the backbone and the OFG
+            (as in the authors' code); the state still conditions with all ``n_obs_steps``. Encoding
+            costs 1 / n_obs_steps as much; what the head loses is the image history.
         use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
             concatenated in camera order instead of the 3D feature (then the cameras are fixed).
         volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
@@ -175,6 +178,7 @@ class OmniDConfig(PreTrainedConfig):
     calibration_noise_focal_pct: float = 0.0
     calibration_noise_principal_px: float = 0.0
     camera_dropout: float = 0.0
+    fuse_last_step_only: bool = False
 
     # Omni-Feature Generator.
     use_ofg: bool = True

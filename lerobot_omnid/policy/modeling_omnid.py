@@ -389,7 +389,8 @@ class OmniDModel(nn.Module):
             )
             image_cond_dim = num_kp * 2 * len(config.image_features)
         state_dim = config.robot_state_feature.shape[0]
-        self.global_cond_dim = (image_cond_dim + state_dim) * config.n_obs_steps
+        image_steps = 1 if config.fuse_last_step_only else config.n_obs_steps
+        self.global_cond_dim = image_cond_dim * image_steps + state_dim * config.n_obs_steps
         self.unet = DiffusionConditionalUnet1d(config, global_cond_dim=self.global_cond_dim)
         scheduler_cls = DDPMScheduler if config.noise_scheduler_type == "DDPM" else DDIMScheduler
         self.noise_scheduler = scheduler_cls(
@@ -453,6 +454,12 @@ class OmniDModel(nn.Module):
         camera_mask: Tensor | None = None,
     ) -> Tensor:
         """images (B, T, S, 3, H, W), state (B, T, Ds) -> (B, global_cond_dim)."""
+        if self.config.fuse_last_step_only:  # B, T, ... -> B, 1, ...: the state keeps every step
+            images = images[:, -1:]
+            if pix_T_cam is not None and pix_T_cam.ndim == 5:
+                pix_T_cam, cam_T_world = pix_T_cam[:, -1:], cam_T_world[:, -1:]
+            image_cond, _ = self.encode_images(images, pix_T_cam, cam_T_world, camera_mask)
+            return torch.cat([image_cond.flatten(1), state.flatten(1)], dim=-1)
         image_cond, _ = self.encode_images(images, pix_T_cam, cam_T_world, camera_mask)
         return torch.cat([image_cond, state], dim=-1).flatten(1)
 
