@@ -1,5 +1,6 @@
-"""omnid-benchmark: the plan per profile (flags, same data/steps/seeds across methods, new tasks), the
-options parsed by LeRobot's own config classes, resumability, the report and chart, argument errors; one
+"""omnid-benchmark: the plan per profile (flags, same data/steps/seeds across methods, new tasks, training
+seeds, controls, position bands), the options parsed by LeRobot's own config classes, resumability, the
+report (intervals, tests, controls, curve) and charts, aggregation of several folders, argument errors; one
 slow end-to-end run of the real tools at tiny sizes."""
 
 from __future__ import annotations
@@ -7,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,27 +19,39 @@ import pytest
 
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import checkpoint_cameras
+from lerobot_omnid.benchmark.charts import bar_chart, position_curve_chart
+from lerobot_omnid.benchmark.outputs import BANDS_CM
 from lerobot_omnid.benchmark.plan import (
     ABLATIONS,
+    BANDS,
+    CONTROL_LABELS,
+    CONTROLS,
+    FEWSHOT_SEED,
     HELDOUT_SEED,
     PROFILES,
     SETTINGS,
     TASK0,
     TASK1,
+    TRAIN_SEED,
     available_tasks,
     build_plan,
+    control_setting,
     is_done,
 )
 from lerobot_omnid.benchmark.report import (
-    EvalEntry,
     ablation_table,
-    bar_chart,
-    collect,
+    comparison_table,
+    controls_table,
+    curve_area,
+    curve_table,
     generalisation_table,
     id_table,
     offline_table,
     raw_table,
 )
+from lerobot_omnid.benchmark.results import EvalEntry, EvalRecord, collect, record_of
+from lerobot_omnid.benchmark.stats import fisher_exact
+from lerobot_omnid.calibration.rig_file import load_calibration_file
 
 LABELS = bench.LABELS
 
@@ -55,9 +69,10 @@ def by_name(runs):
 
 def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
     runs = build_plan(PROFILES["mini"], tmp_path, (TASK0,))
-    assert [r.kind for r in runs].count("record") == 1 + len(SETTINGS)  # training set + held-out sets
+    # training set + held-out sets of every setting but the graded bands
+    assert [r.kind for r in runs].count("record") == 1 + len(SETTINGS) - len(BANDS)
     trains = [r for r in runs if r.kind == "train"]
-    evals = [r for r in runs if r.kind == "eval"]
+    evals = [r for r in runs if r.kind == "eval" and not r.control]
     assert [r.name for r in trains] == ["train/omnid/select_apple", "train/diffusion/select_apple"]
     assert {r.result for r in evals} == {(m, TASK0, s) for m in ("omnid", "diffusion") for s in SETTINGS}
     for option in ("dataset.root", "steps", "batch_size", "seed", "save_freq", "num_workers"):
@@ -68,7 +83,9 @@ def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
         assert len({flag(r.cmd, option) for r in evals}) == 1, option
     assert flag(evals[0].cmd, "env.cameras") == "[cam_b,cam_c,cam_d,cam_e]"
     settings = {(flag(r.cmd, "env.layout"), flag(r.cmd, "env.background")) for r in evals}
-    assert settings == {("id", "id"), ("position_ood", "id")} | {("id", f"ood{i}") for i in range(1, 5)}
+    assert settings == {("id", "id"), ("position_ood", "id")} | {("id", f"ood{i}") for i in range(1, 5)} | {
+        (f"position_band_{k}", "id") for k in range(1, 5)
+    }
     dp = by_name(runs)["train/diffusion/select_apple"].cmd
     for expected in (
         "--policy.pretrained_backbone_weights=null",
@@ -112,7 +129,7 @@ def test_mini_plan_open_loop_diagnostic_on_held_out_episodes(tmp_path):
             assert cmd[cmd.index("--checkpoint") + 1].startswith(str(tmp_path / "train" / method))
             assert cmd[cmd.index("--root") + 1] == str(tmp_path / "data" / f"{TASK0}_bcde_heldout_{setting}")
             assert cmd[cmd.index("--episodes") + 1] == str(PROFILES["mini"].heldout_episodes)
-    assert bench.FEWSHOT_SEED + PROFILES["paper"].fewshot_episodes <= HELDOUT_SEED  # never trained on
+    assert FEWSHOT_SEED + PROFILES["paper"].fewshot_episodes <= HELDOUT_SEED  # never trained on
     no_heldout = dataclasses.replace(PROFILES["mini"], heldout_episodes=0)
     assert not any(r.kind == "offline" for r in build_plan(no_heldout, tmp_path, (TASK0,)))
 
@@ -200,16 +217,20 @@ def test_lerobot_parses_every_training_command(profile, tmp_path):
         if run.kind == "train" and flag(run.cmd, "policy.type"):
             cfg = draccus.parse(TrainPipelineConfig, args=list(run.cmd[1:]))
             assert cfg.policy.type == flag(run.cmd, "policy.type"), run.name
-            assert cfg.steps == p.steps and cfg.seed == bench.TRAIN_SEED
+            assert cfg.steps == p.steps and cfg.seed == TRAIN_SEED
+
+
+CONTROL_MODULE = "lerobot_omnid.benchmark.control_calibration"
 
 
 def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...] = ()):
-    """A stand-in for run_logged: writes what each real tool would leave behind."""
+    """A stand-in for run_logged: writes what each real tool would leave behind. ``rates``: success (%) per
+    model, and per "model/control" for its control evaluations (default 0)."""
 
     def run(cmd, log_path, on_line=None):
         log_path.parent.mkdir(parents=True, exist_ok=True)
         log_path.write_text(" ".join(cmd))
-        tool = Path(cmd[0]).name
+        tool = "control_calibration" if CONTROL_MODULE in cmd else Path(cmd[0]).name
         calls.append(tool)
         if tool in fail:
             return 1
@@ -224,16 +245,19 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
             out.parent.mkdir(parents=True, exist_ok=True)
             error = 10.0 - rates.get(out.parents[2].name, 0.0) / 10.0
             out.write_text(json.dumps({"position_cm": error, "gripper": 0.25}))
+        elif tool == "control_calibration":
+            out = Path(cmd[cmd.index("--out") + 1])
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text("{}")
         elif tool == "lerobot-train":
             ckpt = Path(flag(cmd, "output_dir")) / "checkpoints" / "last" / "pretrained_model"
             ckpt.mkdir(parents=True)
             (ckpt / "model.safetensors").write_bytes(b"")
         else:
-            out = Path(flag(cmd, "output_dir"))
+            out = Path(flag(cmd, "output_dir"))  # .../eval[_<control>]/<model>/<task>/<setting>/seed<k>
             out.mkdir(parents=True, exist_ok=True)
-            rate = rates.get(
-                out.relative_to(out.parents[3]).parts[0], 0.0
-            )  # .../eval/<model>/<task>/<setting>/seed<k>
+            model, control = out.parents[2].name, out.parents[3].name.removeprefix("eval").lstrip("_")
+            rate = rates.get(f"{model}/{control}" if control else model, 0.0)
             n = int(flag(cmd, "eval.n_episodes"))
             (out / "eval_info.json").write_text(
                 json.dumps({"overall": {"pc_success": rate, "n_episodes": n}})
@@ -245,22 +269,63 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
 
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     calls: list[str] = []
-    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    rates = {"omnid": 60.0, "diffusion": 20.0, "omnid/scrambled": 10.0}
+    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, rates))
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
     out = tmp_path / "bench"
     assert bench.main(["--out", str(out)]) == 0
     assert calls.count("omnid-record") == 7 and calls.count("lerobot-train") == 2
-    assert calls.count("lerobot-eval") == 12
+    # 10 task-0 settings per method; controls in ID: OmniD blind and scrambled (each with its calibration
+    # file), DP blind
+    assert calls.count("lerobot-eval") == 23 and calls.count("control_calibration") == 2
     report = (out / "report.md").read_text()
-    assert "| OmniD | **60.0** | 60.0 |" in report  # ID table: best per task in bold, then the average
-    assert "| DP | 20.0 | 20.0 | 20/20/20/20 | — | — |" in report
+    sixty, twenty = "60.0 (31.3-83.2)", "20.0 (5.7-51.0)"  # 6/10 and 2/10 with Wilson 95 % intervals
+    assert f"| OmniD | **{sixty}** | {sixty} |" in report  # ID table: best per task in bold, then the average
+    assert f"| DP | {twenty} | {twenty} | {twenty} | {twenty} | {twenty} | {twenty} | — | — |" in report
     assert "--policy.use_separate_rgb_encoder_per_camera=false" in report  # the options and their reasons
+    assert "| DP blind | `--env.blackout_cameras=[cam_b,cam_c,cam_d,cam_e]` |" in report
+    # OmniD against DP: 6/10 vs 2/10, Newcombe's interval, Fisher p = 0.17
+    assert "| select_apple | id | DP | 6/10 (31.3-83.2 %) | 2/10 (5.7-51.0 %) | +40.0 (" in report
+    assert "| 0.17 |" in report
+    # Against the controls: OmniD 6/10 vs blind 0/10 (p = 0.011) and scrambled 1/10; a background OOD's
+    # blind control is the ID one's, position OOD has none in mini.
+    assert "| OmniD | blind | id | 6/10 (31.3-83.2 %) | 0/10 (0.0-27.8 %) | +60.0 (" in report
+    assert "| 0.011 |" in report
+    assert "| OmniD | scrambled geometry | id | 6/10 (31.3-83.2 %) | 1/10 (" in report
+    assert "| DP | blind | ood3 (control of id) | 2/10 (5.7-51.0 %) | 0/10 (0.0-27.8 %) |" in report
+    assert "| OmniD | blind | position_ood" not in report
+    # The position-shift curve: every band, its area, the chart.
+    assert f"| OmniD | **{sixty}** | **{sixty}** | **{sixty}** | **{sixty}** | 60.0 (44.6-73.7) |" in report
+    assert "Area, OmniD - DP: +40.0 (" in report and (out / "position_curve.png").stat().st_size > 0
     assert (out / "benchmark.png").stat().st_size > 0
-    cells = json.loads((out / "results.json").read_text())["cells"]
-    assert len(cells) == 12 and all(Path(c["eval_info"][0]).is_file() for c in cells)
+    summary = json.loads((out / "results.json").read_text())
+    assert len(summary["cells"]) == 20 and all(Path(c["sources"][0]).is_file() for c in summary["cells"])
+    cell = next(c for c in summary["cells"] if c["model"] == "omnid" and c["setting"] == "id")
+    assert (cell["successes"], cell["episodes"]) == (6, 10) and cell["wilson_95"] == pytest.approx(
+        [31.27, 83.18], abs=0.01
+    )
+    assert {(c["model"], c["control"]) for c in summary["controls"]} == {
+        ("omnid", "blind"),
+        ("omnid", "scrambled"),
+        ("diffusion", "blind"),
+    }
     assert "| OmniD | **4.0 / 0.25** | **4.0 / 0.25** |" in report  # open-loop error: lowest in bold
     assert "| DP | 8.0 / 0.25 |" in report
     assert calls.count("omnid-offline-eval") == 12
-    assert "33 runs: 33 ran" in capsys.readouterr().out
+    assert "46 runs: 46 ran" in capsys.readouterr().out
+    # Each finished evaluation's summary, and the folder's.
+    run_summary = json.loads(
+        (out / "eval_blind" / "omnid" / TASK0 / "id" / "seed1" / "run_summary.json").read_text()
+    )
+    assert run_summary["commit"] == "abc123" and run_summary["control"] == "blind"
+    assert (run_summary["successes"], run_summary["episodes"], run_summary["train_seed"]) == (0, 10, 1000)
+    assert (
+        "--policy.calibration_path=" + str(out / "controls" / "omnid" / TASK0 / "blind.json")
+        in run_summary["command"]
+    )
+    folder = json.loads((out / "summary.json").read_text())
+    assert folder["commit"] == "abc123" and folder["command"] == ["omnid-benchmark", "--out", str(out)]
+    assert len(folder["evaluations"]) == 23
 
     # Resume: nothing finished is redone; an eval whose result is gone, an incomplete training run (its folder
     # without a checkpoint) and a dataset with too few episodes are.
@@ -292,7 +357,9 @@ def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
     assert bench.main(["--out", str(tmp_path), "--settings", "id,ood1"]) == 1
     assert calls == ["omnid-record"] * 3 + ["lerobot-train", "lerobot-train"]
     out = capsys.readouterr().out
-    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 8 blocked" in out
+    # blocked: 2 x 2 evaluations, 2 x 2 open-loop runs, OmniD's 2 calibration files and 2 control
+    # evaluations, DP's blind evaluation
+    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 13 blocked" in out
     assert (tmp_path / "report.md").is_file()
 
 
@@ -325,40 +392,64 @@ def _write_eval(path: Path, rate: float, n: int) -> Path:
     return path
 
 
+def _records(tmp_path, rows) -> list[EvalRecord]:
+    """Finished evaluations' records: rows of (key, eval seed, rate %, episodes[, training seed, control])."""
+    records = []
+    for i, (key, seed, rate, n, *rest) in enumerate(rows):
+        train_seed, control = (rest + [TRAIN_SEED, ""][len(rest) :])[:2]
+        path = _write_eval(tmp_path / f"{i}" / "eval_info.json", rate, n)
+        records.append(record_of(EvalEntry(key, seed, path, train_seed, control)))
+    return records
+
+
 def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
-    entries = [
-        EvalEntry(("omnid", TASK0, "id"), 1, _write_eval(tmp_path / "a.json", 40.0, 5)),
-        EvalEntry(("omnid", TASK0, "id"), 2, _write_eval(tmp_path / "b.json", 60.0, 5)),
-        EvalEntry(("omnid", TASK1, "id"), 1, _write_eval(tmp_path / "c.json", 100.0, 10)),
-        EvalEntry(("diffusion", TASK0, "id"), 1, _write_eval(tmp_path / "d.json", 80.0, 10)),
-        EvalEntry(("diffusion", TASK1, "id"), 1, tmp_path / "missing.json"),
-        *(
-            EvalEntry(("omnid", TASK0, f"ood{i}"), 1, _write_eval(tmp_path / f"o{i}.json", 10.0 * i, 10))
-            for i in (1, 2, 4)
-        ),
-        EvalEntry(("omnid", TASK1, "fewshot_a"), 1, _write_eval(tmp_path / "f.json", 30.0, 10)),
-        EvalEntry(("omnid_no_ofg", TASK0, "id"), 1, _write_eval(tmp_path / "n.json", 20.0, 10)),
-    ]
-    results = collect(entries)
+    records = _records(
+        tmp_path,
+        [
+            (("omnid", TASK0, "id"), 1, 40.0, 5),
+            (("omnid", TASK0, "id"), 2, 60.0, 5),
+            (("omnid", TASK1, "id"), 1, 100.0, 10),
+            (("diffusion", TASK0, "id"), 1, 80.0, 10),
+            *((("omnid", TASK0, f"ood{i}"), 1, 10.0 * i, 10) for i in (1, 2, 4)),
+            (("omnid", TASK1, "fewshot_a"), 1, 30.0, 10),
+            (("omnid_no_ofg", TASK0, "id"), 1, 20.0, 10),
+            (("omnid", TASK0, "id"), 1, 0.0, 10, TRAIN_SEED, "blind"),  # not pooled with the trained model
+        ],
+    )
+    results = collect(records)
     assert results[("omnid", TASK0, "id")].episodes == 10 and results[("omnid", TASK0, "id")].rate == 50.0
+    assert collect(records, control="blind")[("omnid", TASK0, "id")].successes == 0
     table = id_table(results, ("omnid", "diffusion"), (TASK0, TASK1), LABELS)
     assert table[0] == "| Method | Select Apple | Select Chemistry Tube | Average |"
-    assert table[2] == "| OmniD | 50.0 | 100.0 | 75.0 |"  # a lone value is not bold
-    assert table[3] == "| DP | **80.0** | — | 80.0* |"  # average over the evaluated tasks only
+    # a lone value is not bold; the average pools the tasks' episodes (15/20)
+    assert table[2] == "| OmniD | 50.0 (23.7-76.3) | 100.0 (72.2-100.0) | 75.0 (53.1-88.8) |"
+    assert (
+        table[3] == "| DP | **80.0 (49.0-94.3)** | — | 80.0 (49.0-94.3)* |"
+    )  # average of the evaluated tasks
     n_a = {("diffusion", TASK0, "fewshot_a"), ("diffusion", TASK1, "fewshot_a")}
     table = generalisation_table(
         results, ("omnid", "diffusion"), TASK0, TASK1, ("ood1", "ood2", "ood3", "ood4"), n_a, LABELS
     )
-    assert table[0].startswith("| Method | Task 0 ID | Position OOD | Background OOD (ood1/ood2/ood3/ood4) |")
-    assert table[2] == "| OmniD | 50.0 | — | 10/20/—/40 | — | 30.0 |"
-    assert table[3] == "| DP | **80.0** | — | —/—/—/— | n/a | n/a |"
+    assert table[0] == (
+        "| Method | Task 0 ID | Position OOD | Background ood1 | Background ood2 | Background ood3 | "
+        "Background ood4 | Fine-tune Task 0-A | Fine-tune Task 1-A |"
+    )
+    assert table[2] == (
+        "| OmniD | 50.0 (23.7-76.3) | — | 10.0 (1.8-40.4) | 20.0 (5.7-51.0) | — | 40.0 (16.8-68.7) | — | "
+        "30.0 (10.8-60.3) |"
+    )
+    assert table[3] == "| DP | **80.0 (49.0-94.3)** | — | — | — | — | — | n/a | n/a |"
     table = ablation_table(results, TASK0)
     assert table[0] == "|  | ResNet-101 | w/o OFG | Camera A | Base model |"
     assert table[2] == "| ResNet-18 |  | ✓ | ✓ | ✓ |" and table[4] == "| OFG module | ✓ |  | ✓ | ✓ |"
-    assert table[-1] == "| **Success rate (%)** | — | 20.0 | — | 50.0 |"
-    raw = raw_table(entries, LABELS)
-    assert "| DP | select_chemistry_tube | id | 1 |  | — | not run yet |" in raw
-    assert f"`{tmp_path / 'b.json'}`" in "\n".join(raw)
+    assert table[-1] == "| **Success rate (%)** | — | 20.0 (5.7-51.0) | — | 50.0 (23.7-76.3) |"
+    missing = EvalEntry(("diffusion", TASK1, "id"), 1, tmp_path / "missing.json", TRAIN_SEED)
+    raw = "\n".join(raw_table([missing], records, LABELS))
+    assert "| DP | select_chemistry_tube | id |  | 1000 | 1 | — |  | not run yet |" in raw
+    blind = (
+        f"| OmniD | select_apple | id | blind | 1000 | 1 | 0/10 (0.0-27.8 %) | ? | `{records[-1].source}` |"
+    )
+    assert blind in raw
     png = bar_chart(
         results,
         ("omnid", "diffusion"),
@@ -368,6 +459,102 @@ def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
         ("ood1", "ood2", "ood3", "ood4"),
         LABELS,
         tmp_path / "chart" / "b.png",
+    )
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_comparison_pools_training_seeds_and_tests_each(tmp_path):
+    """OmniD vs DP with Fisher's test on the episodes pooled over training seeds, and per seed."""
+    records = _records(
+        tmp_path,
+        [
+            (("omnid", TASK0, "id"), 1, 60.0, 10, 1000),
+            (("omnid", TASK0, "id"), 1, 60.0, 10, 1001),
+            (("diffusion", TASK0, "id"), 1, 0.0, 10, 1000),
+            (("diffusion", TASK0, "id"), 1, 0.0, 10, 1001),
+            (("omnid", TASK0, "ood1"), 1, 50.0, 10, 1000),  # DP not evaluated there: no row
+        ],
+    )
+    table = comparison_table(records, "omnid", ["diffusion"], [(TASK0, "id"), (TASK0, "ood1")], LABELS)
+    assert table[0].endswith("| Fisher p (pooled) | Fisher p per training seed |")
+    assert len(table) == 3  # header, rule, one row
+    # 12/20 vs 0/20 pooled; 6/10 vs 0/10 per seed
+    p_pooled, p_seed = fisher_exact(12, 20, 0, 20), fisher_exact(6, 10, 0, 10)
+    assert p_pooled < 1e-4 and p_seed == pytest.approx(0.0108, abs=1e-4)
+    assert table[2] == (
+        "| select_apple | id | DP | 12/20 (38.7-78.1 %) | 0/20 (0.0-16.1 %) | +60.0 (+33.3 to +78.1) | "
+        f"<0.0001 | 1000: {p_seed:.2g}, 1001: {p_seed:.2g} |"
+    )
+    single = [r for r in records if r.train_seed == 1000]
+    assert (
+        "per training seed"
+        not in comparison_table(single, "omnid", ["diffusion"], [(TASK0, "id")], LABELS)[0]
+    )
+
+
+def test_controls_table_margins_over_each_control(tmp_path):
+    records = _records(
+        tmp_path,
+        [
+            (("omnid", TASK0, "id"), 1, 70.0, 10),
+            (("omnid", TASK0, "ood2"), 1, 30.0, 10),
+            (("omnid", TASK0, "id"), 1, 0.0, 10, TRAIN_SEED, "blind"),
+            (("omnid", TASK0, "id"), 1, 20.0, 10, TRAIN_SEED, "scrambled"),
+            (("diffusion", TASK0, "id"), 1, 50.0, 10),
+            (("diffusion", TASK0, "id"), 1, 30.0, 10, TRAIN_SEED, "blind"),
+        ],
+    )
+    control_of = {(s, c): control_setting(s, c, ("id",)) for s in SETTINGS for c in CONTROLS}
+    assert control_of[("ood2", "blind")] == "id" and control_of[("ood2", "scrambled")] is None
+    assert control_of[("position_ood", "blind")] is None
+    table = controls_table(
+        records, ("omnid", "diffusion"), TASK0, SETTINGS, control_of, LABELS, CONTROL_LABELS
+    )
+    assert table[0] == "| Method | Control | Setting | As trained | Control | Margin (pp) | Fisher p |"
+    assert (
+        table[2]
+        == "| OmniD | blind | id | 7/10 (39.7-89.2 %) | 0/10 (0.0-27.8 %) | +70.0 (+28.9 to +89.2) | 0.0031 |"
+    )
+    assert table[3].startswith(
+        "| OmniD | blind | ood2 (control of id) | 3/10 (10.8-60.3 %) | 0/10 (0.0-27.8 %) |"
+    )
+    assert table[4].startswith("| DP | blind | id | 5/10 (23.7-76.3 %) | 3/10 (10.8-60.3 %) | +20.0 (")
+    assert table[5].startswith("| OmniD | scrambled geometry | id | 7/10 (39.7-89.2 %) | 2/10 (5.7-51.0 %) |")
+    assert len(table) == 6  # DP has no scrambled control, OmniD's scrambled none in ood2
+
+
+def test_position_curve_table_area_and_chart(tmp_path):
+    bands = BANDS_CM
+    assert bands == {
+        "position_band_1": (0.0, 2.5),
+        "position_band_2": (2.5, 5.0),
+        "position_band_3": (5.0, 7.5),
+        "position_band_4": (7.5, 10.0),
+    }
+    records = _records(
+        tmp_path,
+        [
+            *(
+                (("omnid", TASK0, band), 1, rate, 10)
+                for band, rate in zip(BANDS, (80.0, 60.0, 40.0, 20.0), strict=True)
+            ),
+            *(
+                (("diffusion", TASK0, band), 1, rate, 10)
+                for band, rate in zip(BANDS, (40.0, 10.0, 0.0, 0.0), strict=True)
+            ),
+            (("act", TASK0, "position_band_1"), 1, 50.0, 10),
+        ],
+    )
+    results = collect(records)
+    area, counts = curve_area(results, "omnid", TASK0, bands)
+    assert area == pytest.approx(50.0) and (counts.successes, counts.episodes) == (20, 40)
+    assert curve_area(results, "act", TASK0, bands) is None  # bands missing
+    table = curve_table(results, ("omnid", "diffusion", "act"), TASK0, bands, LABELS)
+    assert table[0] == "| Method | 0-2.5 cm | 2.5-5 cm | 5-7.5 cm | 7.5-10 cm | Area (mean over 0-10 cm) |"
+    assert table[2].startswith("| OmniD | **80.0 (49.0-94.3)** | **60.0 (31.3-83.2)** |")
+    assert table[2].endswith("| 50.0 (35.2-64.8) |") and table[4].endswith("| — | — | — | — |")
+    png = position_curve_chart(
+        results, ("omnid", "diffusion", "act"), TASK0, bands, LABELS, tmp_path / "c.png"
     )
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -435,7 +622,8 @@ def test_resumability_checks(tmp_path):
 
 @pytest.mark.slow
 def test_real_tools_end_to_end_tiny(tmp_path):
-    """The real omnid-record, lerobot-train (OmniD and stock DP) and lerobot-eval at the smallest sizes."""
+    """The real omnid-record, lerobot-train (OmniD and stock DP) and lerobot-eval, controls included, at the
+    smallest sizes."""
     out = tmp_path / "bench"
     argv = [
         str(Path(sys.executable).parent / "omnid-benchmark"),
@@ -463,9 +651,22 @@ def test_real_tools_end_to_end_tiny(tmp_path):
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=900, env=env)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    cells = {(c["model"], c["setting"]): c for c in json.loads((out / "results.json").read_text())["cells"]}
+    summary = json.loads((out / "results.json").read_text())
+    cells = {(c["model"], c["setting"]): c for c in summary["cells"]}
     assert set(cells) == {("omnid", "id"), ("diffusion", "id")}
     assert all(c["episodes"] == 1 for c in cells.values())
+    # The controls ran through the real tools: OmniD with the calibration files written from its checkpoint
+    # (lerobot-eval --policy.calibration_path), DP with black images (--env.blackout_cameras).
+    controls = {(c["model"], c["control"]): c["episodes"] for c in summary["controls"]}
+    assert controls == {("omnid", "blind"): 1, ("omnid", "scrambled"): 1, ("diffusion", "blind"): 1}
+    for control in ("blind", "scrambled"):
+        calibrations = load_calibration_file(out / "controls" / "omnid" / TASK0 / f"{control}.json")
+        assert sorted(calibrations) == [f"observation.images.cam_{c}" for c in "bcde"]
+    run_summary = json.loads(
+        (out / "eval_blind" / "diffusion" / TASK0 / "id" / "seed1" / "run_summary.json").read_text()
+    )
+    assert "--env.blackout_cameras=[cam_b,cam_c,cam_d,cam_e]" in run_summary["command"]
+    assert len(json.loads((out / "summary.json").read_text())["evaluations"]) == 5
     report = (out / "report.md").read_text()
     assert "| Method | Select Apple | Average |" in report
     for method in ("omnid", "diffusion"):  # the open-loop diagnostic ran with the real checkpoints
@@ -510,12 +711,134 @@ def test_ctrl_c_keeps_finished_runs_and_writes_the_report(monkeypatch, tmp_path,
     monkeypatch.setattr(bench, "run_logged", interrupt_second_eval)
     assert bench.main(["--out", str(tmp_path)]) == 130
     assert "Interrupted" in capsys.readouterr().out
-    assert "| OmniD | 50.0 |" in (tmp_path / "report.md").read_text()
+    assert "| OmniD | 50.0 (23.7-76.3) |" in (tmp_path / "report.md").read_text()
     calls.clear()
     monkeypatch.setattr(bench, "run_logged", fake)
     assert bench.main(["--out", str(tmp_path)]) == 0
     assert (
         calls.count("lerobot-train") == 1
-        and calls.count("lerobot-eval") == 11
+        and calls.count("lerobot-eval") == 22
         and "omnid-record" not in calls
     )
+
+
+def test_training_seeds_repeat_the_models_in_their_own_folders(tmp_path):
+    """The default seed keeps the folders and names of the single-seed plan (finished runs stay valid);
+    another seed repeats every training run and its evaluations in ``train_seed<seed>/`` on the same data."""
+    single = by_name(build_plan(PROFILES["mini"], tmp_path, (TASK0,)))
+    p = dataclasses.replace(PROFILES["mini"], train_seeds=(TRAIN_SEED, 1001))
+    runs = by_name(build_plan(p, tmp_path, (TASK0,)))
+    for name, run in single.items():
+        assert runs[name] == run, name
+    extra = {name: run for name, run in runs.items() if name not in single}
+    assert all(name.startswith("train_seed1001/") for name in extra)
+    assert len(extra) == len([r for r in single.values() if r.kind != "record"])  # the data is shared
+    train = runs["train_seed1001/train/omnid/select_apple"]
+    assert flag(train.cmd, "seed") == "1001" and train.train_seed == 1001
+    assert train.output == tmp_path / "train_seed1001" / "train" / "omnid" / TASK0
+    assert flag(train.cmd, "dataset.root") == flag(single["train/omnid/select_apple"].cmd, "dataset.root")
+    evaluation = runs["train_seed1001/eval/diffusion/select_apple/ood3/seed1"]
+    assert (
+        evaluation.needs == ("train_seed1001/train/diffusion/select_apple",) and evaluation.train_seed == 1001
+    )
+    assert flag(evaluation.cmd, "seed") == flag(single["eval/diffusion/select_apple/ood3/seed1"].cmd, "seed")
+    assert flag(evaluation.cmd, "output_dir").startswith(str(tmp_path / "train_seed1001" / "eval"))
+    assert "train_seed1001/eval_blind/omnid/select_apple/id/seed1" in runs
+    assert "train_seed1001/offline/omnid/select_apple/id" in runs
+
+
+def test_controls_and_position_bands_in_the_plan(tmp_path):
+    runs = by_name(build_plan(PROFILES["mini"], tmp_path, (TASK0,)))
+    checkpoint = str(tmp_path / "train" / "omnid" / TASK0 / "checkpoints" / "last" / "pretrained_model")
+    for control in ("blind", "scrambled"):
+        calibration = runs[f"calibration/omnid/{TASK0}/{control}"]
+        assert calibration.needs == (f"train/omnid/{TASK0}",) and CONTROL_MODULE in calibration.cmd
+        assert calibration.cmd[calibration.cmd.index("--checkpoint") + 1] == checkpoint
+        assert calibration.cmd[calibration.cmd.index("--control") + 1] == control
+        assert calibration.output == tmp_path / "controls" / "omnid" / TASK0 / f"{control}.json"
+        evaluation = runs[f"eval_{control}/omnid/{TASK0}/id/seed1"]
+        assert evaluation.control == control and evaluation.result == ("omnid", TASK0, "id")
+        assert evaluation.needs == (f"train/omnid/{TASK0}", calibration.name)
+        assert flag(evaluation.cmd, "policy.calibration_path") == str(calibration.output)
+        assert flag(evaluation.cmd, "policy.path") == checkpoint
+        assert flag(evaluation.cmd, "env.blackout_cameras") is None
+        reference = runs[f"eval/omnid/{TASK0}/id/seed1"].cmd  # the same episodes as the trained model's
+        for option in ("seed", "env.layout", "env.background", "env.cameras", "eval.n_episodes"):
+            assert flag(evaluation.cmd, option) == flag(reference, option), option
+    blind_dp = runs[f"eval_blind/diffusion/{TASK0}/id/seed1"]
+    assert flag(blind_dp.cmd, "env.blackout_cameras") == "[cam_b,cam_c,cam_d,cam_e]"
+    assert flag(blind_dp.cmd, "policy.calibration_path") is None
+    assert not any(
+        "scrambled/diffusion" in name or "eval_blind/omnid/select_apple/ood1" in name for name in runs
+    )
+    assert not [name for name in runs if name.startswith("eval_") and "/id/" not in name]  # mini: ID only
+    for k, band in enumerate(BANDS, 1):
+        run = runs[f"eval/omnid/{TASK0}/{band}/seed1"]
+        assert (flag(run.cmd, "env.layout"), flag(run.cmd, "env.background")) == (f"position_band_{k}", "id")
+        assert f"record/{TASK0}_bcde_heldout_{band}" not in runs  # no open-loop diagnostic for the bands
+    paper = by_name(build_plan(PROFILES["paper"], tmp_path, (TASK0,)))
+    assert f"eval_blind/vqbet/{TASK0}/position_ood/seed4" in paper
+    assert flag(paper[f"eval_blind/vqbet/{TASK0}/id/seed1"].cmd, "env.blackout_cameras") == "[cam_b]"
+    no_controls = dataclasses.replace(PROFILES["mini"], control_settings=())
+    assert not any(r.control or r.kind == "calibration" for r in build_plan(no_controls, tmp_path, (TASK0,)))
+
+
+def test_seed_and_control_options(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
+    argv = ["--dry-run", "--out", str(tmp_path), "--train-seeds", "1000,7", "--control-settings", "none"]
+    assert bench.main(argv) == 0
+    out = capsys.readouterr().out
+    assert "train_seed7/train/omnid/select_apple" in out and "--seed=7" in out
+    assert "eval_blind" not in out and "control_calibration" not in out
+    assert bench.main(["--dry-run", "--out", str(tmp_path), "--control-settings", "id,position_ood"]) == 0
+    assert "eval_blind/diffusion/select_apple/position_ood/seed1" in capsys.readouterr().out
+    for bad, expected in (
+        (["--train-seeds", "-1"], "non-negative"),
+        (["--control-settings", "id,far"], "far"),
+    ):
+        with pytest.raises(SystemExit):
+            bench.main([*bad, "--out", str(tmp_path / "b")])
+        assert expected in capsys.readouterr().err
+
+
+def test_report_only_aggregates_folders_from_two_machines(monkeypatch, tmp_path, capsys):
+    """Machine A runs training seed 1000, machine B seed 1001 (its summary copied as a file); the report of
+    A with B's results pools both seeds and tests each; the same evaluation twice counts once."""
+    calls: list[str] = []
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    small = ["--settings", "id,ood1", "--heldout-episodes", "0"]
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert bench.main(["--out", str(a), *small]) == 0
+    assert bench.main(["--out", str(b), *small, "--train-seeds", "1001"]) == 0
+    copied = tmp_path / "docs" / "results" / "mini_seed1001.json"
+    copied.parent.mkdir(parents=True)
+    copied.write_text((b / "summary.json").read_text())
+    shutil.rmtree(b)  # the other machine's folder is not here: its summary is enough
+    calls.clear()
+    assert bench.main(["--report-only", "--out", str(a), *small, "--also", str(copied), str(a)]) == 0
+    assert calls == []
+    report = (a / "report.md").read_text()
+    assert "Merged with 7 evaluations of:" in report  # 2 x 2 settings + 3 controls: B's, not A's again
+    # OmniD 12/20 vs DP 4/20 pooled over the two seeds, and each seed's 6/10 vs 2/10 (p = 0.17)
+    assert "| select_apple | id | DP | 12/20 (38.7-78.1 %) | 4/20 (8.1-41.6 %) |" in report
+    assert "| 1000: 0.17, 1001: 0.17 |" in report
+    assert f"`{copied}`" in report and "| OmniD | select_apple | id |  | 1001 | 1 | 6/10" in report
+    assert json.loads((a / "results.json").read_text())["train_seeds"] == [1000, 1001]
+    assert len(json.loads((a / "summary.json").read_text())["evaluations"]) == 7  # only A's own
+    # A result that contradicts another of the same evaluation, and results of another experiment
+    data = json.loads(copied.read_text())
+    data["evaluations"][0]["train_seed"] = TRAIN_SEED
+    data["evaluations"][0]["successes"] = 1
+    conflict = tmp_path / "conflict.json"
+    conflict.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=r"expected one result, got 6/10 in .* and 1/10 in .*conflict.json"):
+        bench.main(["--report-only", "--out", str(a), *small, "--also", str(conflict)])
+    for bad, expected in (
+        (["--steps", "5"], "steps: expected 5 as in this"),
+        ([], "expected a benchmark summary"),
+    ):
+        also = str(copied) if bad else str(tmp_path / "nowhere")
+        with pytest.raises(SystemExit):
+            bench.main(["--report-only", "--out", str(a), *small, *bad, "--also", also])
+        assert expected in capsys.readouterr().err

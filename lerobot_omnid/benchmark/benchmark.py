@@ -2,17 +2,21 @@
 
 OmniD and LeRobot's stock Diffusion Policy (DP), ACT and VQ-BeT are trained with ``lerobot-train`` on the
 same datasets recorded by ``omnid-record`` (cameras B-E), for the same steps with the same seed, and
-evaluated with ``lerobot-eval``: ID success on every task; on task 0 (select_apple) position OOD, four
-background OODs and few-shot fine-tuning on the unseen camera A (task 0 and task 1); OmniD's ablations.
-Writes ``<out>/report.md`` (tables laid out like the paper's), ``<out>/benchmark.png`` (bar chart) and
-``<out>/results.json``.
+evaluated with ``lerobot-eval``: ID success on every task; on task 0 (select_apple) position OOD, the graded
+position bands, four background OODs, each method's controls (blind; OmniD's scrambled geometry) and few-shot
+fine-tuning on the unseen camera A (task 0 and task 1); OmniD's ablations. Writes ``<out>/report.md`` (tables
+with Wilson intervals and Fisher tests), ``<out>/benchmark.png`` and ``<out>/position_curve.png`` (charts),
+``<out>/results.json`` and ``<out>/summary.json`` (this folder's evaluations, to combine with others':
+``--report-only --also <folder or summary.json> ...``).
 
     omnid-benchmark --dry-run          # the plan: settings, every command, what is already done
-    omnid-benchmark                    # profile mini: select_apple, OmniD vs DP, CPU (under 2 h on 2 cores)
+    omnid-benchmark                    # profile mini: select_apple, OmniD vs DP, CPU (about 2.3 h on 2 cores)
     omnid-benchmark --profile paper    # every method, task and setting at the paper's sizes (GPU, days)
 
 Resumable: a run whose output is complete (a dataset with all its episodes, a final checkpoint, an
 eval_info.json) is not run again; an incomplete one is deleted and rerun. Each run logs to <out>/logs/.
+
+    omnid-benchmark --report-only --out A --also B docs/results/mini_seed1001.json   # results of 3 folders
 """
 
 from __future__ import annotations
@@ -22,38 +26,26 @@ import dataclasses
 import json
 import shlex
 import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 from tqdm import tqdm
 
-from lerobot_omnid.benchmark import report
+from lerobot_omnid.benchmark import results
 from lerobot_omnid.benchmark.commands import run_logged
+from lerobot_omnid.benchmark.outputs import eval_entry, settings_markdown, write_outputs
 from lerobot_omnid.benchmark.plan import (
-    ABLATIONS,
-    BACKGROUND_OODS,
-    EVAL_SEED_STRIDE,
-    FEWSHOT_SEED,
-    HELDOUT_SEED,
     LABELS,
     METHODS,
-    NOT_FINETUNABLE,
-    OFFLINE_OUTPUT,
     PROFILES,
     SETTINGS,
-    TASK0,
-    TASK1,
-    TRAIN_SEED,
-    VQBET_CAMERA,
     BenchmarkProfile,
     Run,
-    ablation_flags,
     available_tasks,
     build_plan,
-    finetune_flags,
     is_done,
-    method_flags,
 )
 from lerobot_omnid.cli import int_at_least
 
@@ -69,55 +61,6 @@ OVERRIDES = {  # option: (profile field, minimum)
     "image_size": ("image_size", 16),
     "num_workers": ("num_workers", 0),
 }
-
-
-def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
-    """What is run and how, with every non-default option and its reason."""
-    evals = ", ".join(f"{k} (env seeds {k * EVAL_SEED_STRIDE}+)" for k in p.eval_seeds)
-    parts = [f"{TASK0} settings {', '.join(p.settings)}"]
-    parts += ["few-shot on camera A"] if p.fewshot else []
-    parts += ["ablations"] if p.ablations else []
-    lines = [
-        f"Profile `{p.name}` on `{p.device}`: methods {', '.join(LABELS[m] for m in p.methods)}; "
-        f"tasks {', '.join(tasks)}; {', '.join(parts)}.",
-        "",
-        f"- Same for every method: datasets of {p.episodes} expert episodes per task (cameras B-E, "
-        f"{p.image_size}x{p.image_size} px, env seeds from 0), {p.steps} training steps, "
-        f"batch {p.batch_size}, `--seed={TRAIN_SEED}`; evaluation: {p.eval_episodes} episodes per setting "
-        f"and eval seed, eval seeds {evals}, at most {p.episode_length} env steps (10 per second).",
-        f"- Few-shot: the task-0 model fine-tuned for {p.finetune_steps} steps on {p.fewshot_episodes} "
-        f"camera-A episodes (env seeds from {FEWSHOT_SEED}) of {TASK0} and of {TASK1}, evaluated with "
-        "camera A."
-        if p.fewshot
-        else "- Few-shot fine-tuning: not in this profile.",
-        "- Cells pool the episodes of all eval seeds; `—`: not run (yet); `n/a`: not applicable.",
-        f"- Open-loop diagnostic: {p.heldout_episodes} held-out expert episodes per {TASK0} setting."
-        if p.heldout_episodes
-        else "- Open-loop diagnostic: off.",
-        "",
-        "| Method | Option | Why |",
-        "| --- | --- | --- |",
-    ]
-    rows = [(LABELS[m], f, why) for m in p.methods for f, why in method_flags(m, p)]
-    if p.ablations:
-        base = {f for f, _ in method_flags("omnid", p)}
-        rows += [(LABELS[a], f, why) for a in ABLATIONS for f, why in ablation_flags(a, p) if f not in base]
-    if p.fewshot:
-        for m in p.methods:
-            if m in NOT_FINETUNABLE:
-                rows.append((f"{LABELS[m]} fine-tune", "(none)", NOT_FINETUNABLE[m]))
-            else:
-                rows += [(f"{LABELS[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
-    lines += [f"| {who} | `{flag}` | {why} |" for who, flag, why in rows]
-    notes = {
-        "act": "ACT: one observation step (the only value LeRobot's ACT supports); without pretrained "
-        "weights its frozen BatchNorm layers are identities (it has no GroupNorm option); its own optimiser "
-        "(AdamW 1e-5, no schedule) is kept.",
-        "vqbet": f"VQ-BeT: evaluated with camera {VQBET_CAMERA[0][-1].upper()} only (its single input); "
-        "its own optimiser settings are kept.",
-    }
-    lines += [""] + [f"- {notes[m]}" for m in p.methods if m in notes]
-    return lines
 
 
 def describe_plan(runs: list[Run]) -> list[str]:
@@ -136,8 +79,29 @@ def clear_incomplete(run: Run, out: Path) -> None:
         shutil.rmtree(run.output)
 
 
-def execute(runs: list[Run], out: Path, verbose: bool) -> tuple[dict[str, str], dict[str, float]]:
-    """Run what is not done yet, in order; a failed run blocks the runs that need its output.
+def code_commit() -> str | None:
+    """The git commit of this package's checkout, ``+dirty`` when tracked files differ from it; None when
+    it is not a git checkout (an installed copy)."""
+    root = Path(__file__).resolve().parents[2]
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no")
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return commit + ("+dirty" if dirty else "")
+
+
+def execute(
+    runs: list[Run], out: Path, verbose: bool, commit: str | None = None
+) -> tuple[dict[str, str], dict[str, float]]:
+    """Run what is not done yet, in order; a failed run blocks the runs that need its output. A finished
+    evaluation gets its ``run_summary.json`` (counts, ``commit``, command) beside its ``eval_info.json``.
     Returns each run's status ("reused", "ran", "failed", "blocked") and the seconds of those run."""
     status, seconds = {}, {}
     bar = tqdm(runs, desc="benchmark", unit="run", file=sys.stdout, dynamic_ncols=True)
@@ -167,6 +131,9 @@ def execute(runs: list[Run], out: Path, verbose: bool) -> tuple[dict[str, str], 
         seconds[run.name] = time.perf_counter() - start
         if returncode == 0 and is_done(run):
             status[run.name] = "ran"
+            if run.kind == "eval":
+                record = results.record_of(eval_entry(run), commit)
+                (run.output / results.RUN_SUMMARY).write_text(json.dumps(record.to_json(), indent=2) + "\n")
             tqdm.write(f"{run.name}: done in {seconds[run.name]:.0f} s")
         else:
             status[run.name] = "failed"
@@ -174,61 +141,13 @@ def execute(runs: list[Run], out: Path, verbose: bool) -> tuple[dict[str, str], 
     return status, seconds
 
 
-def write_outputs(p: BenchmarkProfile, tasks: tuple[str, ...], runs: list[Run], out: Path) -> dict:
-    """report.md, benchmark.png and results.json from the eval_info.json files found now."""
-    entries = [
-        report.EvalEntry(r.result, r.seed, r.output / "eval_info.json") for r in runs if r.kind == "eval"
-    ]
-    offline = {r.result: r.output / OFFLINE_OUTPUT for r in runs if r.kind == "offline"}
-    results = report.collect(entries)
-    n_a = {(m, t, "fewshot_a") for m in NOT_FINETUNABLE for t in (TASK0, TASK1)} if p.fewshot else set()
-    chart = report.bar_chart(
-        results, p.methods, tasks, TASK0, TASK1, BACKGROUND_OODS, LABELS, out / "benchmark.png"
-    )
-    lines = ["# OmniD benchmark: OmniD vs DP, ACT, VQ-BeT", "", *settings_markdown(p, tasks), ""]
-    lines += ["## ID success rate (%) per task, cameras B-E", ""]
-    lines += report.id_table(results, p.methods, tasks, LABELS)
-    if TASK0 in tasks:
-        lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
-        lines += report.generalisation_table(results, p.methods, TASK0, TASK1, BACKGROUND_OODS, n_a, LABELS)
-    if offline:
-        lines += [
-            "",
-            f"## Task 0 ({TASK0}): open-loop action error on held-out expert episodes",
-            "",
-            f"Diagnostic next to the success rates: {p.heldout_episodes} expert episodes per setting "
-            f"(env seeds from {HELDOUT_SEED}, never trained on) replayed through each policy as "
-            "`lerobot-eval` runs it (`omnid-offline-eval`); mean TCP position error (cm) / gripper error "
-            "(0..1) of its action at every frame against the expert's. Lower is better; informative even "
-            "when every success rate is 0. The last row is the error of holding the measured pose and "
-            "gripper at every frame: a policy that does not beat it has not learned to act yet.",
-            "",
-        ]
-        lines += report.offline_table(offline, p.methods, TASK0, p.settings, LABELS)
-    if p.ablations:
-        lines += ["", f"## Ablation: OmniD on task 0 ({TASK0}), ID success rate (%)", ""]
-        lines += report.ablation_table(results, TASK0)
-    lines += ["", f"![success rates]({chart.name})", "", "## Evaluation runs", ""]
-    lines += report.raw_table(entries, LABELS)
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    cells = [
-        {
-            "model": m,
-            "task": t,
-            "setting": s,
-            "success_rate": c.rate,
-            "episodes": c.episodes,
-            "eval_info": [str(x) for x in c.paths],
-        }
-        for (m, t, s), c in results.items()
-    ]
-    summary = {"profile": dataclasses.asdict(p), "tasks": list(tasks), "cells": cells}
-    (out / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return summary
+def _csv(kind, allowed, none: bool = False):
+    """argparse type: distinct comma-separated values of ``kind`` from ``allowed`` (any if None); ``none``
+    also accepts the word none for the empty tuple."""
 
-
-def _csv(kind, allowed):
     def parse(text: str) -> tuple:
+        if none and text.strip() == "none":
+            return ()
         try:
             items = tuple(kind(x.strip()) for x in text.split(",") if x.strip())
         except ValueError:
@@ -257,6 +176,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--settings", type=_csv(str, SETTINGS), help=f"task-0 settings, of {','.join(SETTINGS)}"
     )
     parser.add_argument("--eval-seeds", type=_csv(int, None), help="comma-separated eval seeds, e.g. 1,2,3,4")
+    parser.add_argument(
+        "--train-seeds",
+        type=_csv(int, None),
+        help="comma-separated lerobot-train seeds, e.g. 1000,1001 (default: 1000; other seeds' runs go "
+        "to <out>/train_seed<seed>/)",
+    )
+    parser.add_argument(
+        "--control-settings",
+        type=_csv(str, SETTINGS, none=True),
+        help="task-0 settings in which the controls are evaluated, or none (mini: id; paper: "
+        "id,position_ood)",
+    )
     for option, (name, minimum) in OVERRIDES.items():
         values = ", ".join(f"{k} {getattr(v, name)}" for k, v in PROFILES.items())
         parser.add_argument(
@@ -268,6 +199,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--dry-run", action="store_true", help="print the plan and every command, run nothing"
     )
     parser.add_argument("--report-only", action="store_true", help="only rebuild the report from results")
+    parser.add_argument(
+        "--also",
+        type=Path,
+        nargs="+",
+        default=[],
+        metavar="PATH",
+        help="other benchmark folders or summary files (their summary.json, e.g. copied under docs/results/) "
+        "whose evaluations the report combines with this folder's",
+    )
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser
 
@@ -281,7 +221,9 @@ def resolve_profile(parser: argparse.ArgumentParser, args: argparse.Namespace) -
             changes[name] = value
     if args.eval_seeds and min(args.eval_seeds) < 1:
         parser.error(f"--eval-seeds: expected positive integers, got {list(args.eval_seeds)}")
-    for name in ("device", "methods", "tasks", "settings", "eval_seeds"):
+    if args.train_seeds and min(args.train_seeds) < 0:
+        parser.error(f"--train-seeds: expected non-negative integers, got {list(args.train_seeds)}")
+    for name in ("device", "methods", "tasks", "settings", "eval_seeds", "train_seeds", "control_settings"):
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
     if "omnid" not in changes.get("methods", p.methods):
@@ -297,9 +239,18 @@ def main(argv: list[str] | None = None) -> int:
     p = resolve_profile(parser, args)
     tasks = p.tasks or available_tasks()
     out = (args.out or Path(f"outputs/benchmark_{p.name}")).resolve()
+    for path in args.also:  # before running anything: a summary that cannot be combined is an error now
+        try:
+            profile, _ = results.read_summary(path)
+            results.check_comparable(dataclasses.asdict(p), profile, str(path))
+        except ValueError as e:
+            parser.error(f"--also: {e}")
+    commit = code_commit()
+    command = ["omnid-benchmark", *(sys.argv[1:] if argv is None else argv)]
     runs = build_plan(p, out, tasks)
     print("\n".join(settings_markdown(p, tasks)))
-    kinds = {k: sum(r.kind == k for r in runs) for k in ("record", "prepare", "train", "eval", "offline")}
+    kinds = ("record", "prepare", "train", "calibration", "eval", "offline")
+    kinds = {k: sum(r.kind == k for r in runs) for k in kinds}
     per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
     todo = sum(not is_done(r) for r in runs)
     print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run; {out}")
@@ -307,19 +258,22 @@ def main(argv: list[str] | None = None) -> int:
         print("\n".join(describe_plan(runs)))
         return 0
     try:
-        status, seconds = ({}, {}) if args.report_only else execute(runs, out, args.verbose)
+        status, seconds = ({}, {}) if args.report_only else execute(runs, out, args.verbose, commit)
     except KeyboardInterrupt:
-        write_outputs(p, tasks, runs, out)
+        write_outputs(p, tasks, runs, out, args.also, commit, command)
         print(f"\nInterrupted: finished runs are kept, the one in progress is redone next time; {out}")
         return 130
-    summary = write_outputs(p, tasks, runs, out)
+    summary = write_outputs(p, tasks, runs, out, args.also, commit, command)
     counts = {s: list(status.values()).count(s) for s in ("reused", "ran", "failed", "blocked")}
     print(f"\n{len(runs)} runs: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran"))
     print(f"time: {sum(seconds.values()) / 60:.1f} min; report: {out / 'report.md'}, {out / 'benchmark.png'}")
-    for cell in summary["cells"]:
+    print(f"this folder's evaluations (copy under docs/results/ to combine): {out / results.SUMMARY}")
+    for cell in [*summary["cells"], *summary["controls"]]:
+        low, high = cell["wilson_95"]
         print(
-            f"  {LABELS.get(cell['model'], cell['model'])} {cell['task']} {cell['setting']}: "
-            f"{cell['success_rate']:.1f}% of {cell['episodes']}"
+            f"  {LABELS.get(cell['model'], cell['model'])} {cell['task']} {cell['setting']}"
+            f"{' ' + cell['control'] if cell['control'] else ''}: {cell['successes']}/{cell['episodes']} "
+            f"= {cell['success_rate']:.1f}% ({low:.1f}-{high:.1f})"
         )
     return 1 if counts["failed"] or counts["blocked"] else 0
 

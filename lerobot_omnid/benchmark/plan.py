@@ -2,12 +2,15 @@
 from the policy's default comes with its reason) and the plan of record / train / eval runs.
 
 Pure: builds command lines and paths from a profile, runs nothing. The protocol (DESIGN.md, section 4 of
-the paper): cameras B-E for training; every task's ID success; on task 0 position OOD and four background
-OODs; the task-0 model fine-tuned with camera-A episodes of task 0 and of task 1; OmniD ablations.
+the paper): cameras B-E for training; every task's ID success; on task 0 position OOD, the graded position
+bands and four background OODs, and each method's controls (the same checkpoint blind; OmniD with its
+cameras' calibrations permuted); the task-0 model fine-tuned with camera-A episodes of task 0 and of task 1;
+OmniD ablations. Everything after the recordings is repeated per training seed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 from collections.abc import Sequence
@@ -16,7 +19,7 @@ from pathlib import Path
 
 import gym_omnid.constants
 from gym_omnid import TRAIN_CAMERAS
-from gym_omnid.constants import STATE_DIM
+from gym_omnid.constants import POSITION_BANDS, STATE_DIM
 
 from lerobot_omnid.benchmark.commands import (
     BIN,
@@ -44,13 +47,17 @@ LABELS = {
 }
 TASK0, TASK1 = "select_apple", "select_chemistry_tube"  # the paper's task 0 and task 1
 BACKGROUND_OODS = ("ood1", "ood2", "ood3", "ood4")
-SETTINGS = ("id", "position_ood", *BACKGROUND_OODS)
+BANDS = tuple(POSITION_BANDS)  # position_band_1 .. _4: the position-shift curve's settings
+SETTINGS = ("id", "position_ood", *BACKGROUND_OODS, *BANDS)
+CONTROLS = ("blind", "scrambled")
+"""Evaluations of a trained checkpoint that test what drives it (see :func:`control_flags`)."""
+CONTROL_LABELS = {"blind": "blind", "scrambled": "scrambled geometry"}
 ABLATIONS = ("omnid_resnet101", "omnid_no_ofg", "omnid_cam_a")
 FEWSHOT = "fewshot_a"
 """Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
 CAMERA_A = ("cam_a",)
 VQBET_CAMERA = ("cam_b",)  # LeRobot's VQ-BeT takes exactly one image
-TRAIN_SEED = 1000  # lerobot-train --seed of every run (LeRobot's default): same init RNG and batch order
+TRAIN_SEED = 1000  # lerobot-train --seed (LeRobot's default): same init RNG and batch order for every method
 EVAL_SEED_STRIDE = 1000  # eval seed k runs env seeds k*1000 ... k*1000 + episodes - 1
 FEWSHOT_SEED = 100_000  # first env seed of the few-shot recordings (training sets start at 0)
 HELDOUT_SEED = 200_000  # first env seed of the held-out expert recordings of the open-loop diagnostic
@@ -83,6 +90,8 @@ class BenchmarkProfile:
     eval_seeds: tuple[int, ...]
     episode_length: int  # time limit of an evaluation episode, env steps (10 per second)
     settings: tuple[str, ...]  # evaluation settings of task 0; other tasks are evaluated ID
+    control_settings: tuple[str, ...]  # task-0 settings in which the controls are evaluated too
+    train_seeds: tuple[int, ...]  # lerobot-train --seed of each repetition of the training runs
     fewshot: bool
     ablations: bool
     device: str
@@ -97,16 +106,15 @@ PROFILES = {
     "mini": BenchmarkProfile(
         name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
         image_size=64, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, heldout_episodes=3,
-        eval_seeds=(1,),
-        episode_length=200, settings=SETTINGS, fewshot=False, ablations=False, device="cpu", num_workers=2,
-        small=True,
+        eval_seeds=(1,), episode_length=200, settings=SETTINGS, control_settings=("id",),
+        train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cpu", num_workers=2, small=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
         steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, heldout_episodes=20,
-        eval_seeds=(1, 2, 3, 4),
-        episode_length=200, settings=SETTINGS, fewshot=True, ablations=True, device="cuda", num_workers=8,
-        small=False,
+        eval_seeds=(1, 2, 3, 4), episode_length=200, settings=SETTINGS,
+        control_settings=("id", "position_ood"), train_seeds=(TRAIN_SEED,), fewshot=True, ablations=True,
+        device="cuda", num_workers=8, small=False,
     ),
 }
 # fmt: on
@@ -293,29 +301,79 @@ def setting_env(setting: str) -> tuple[str, str]:
     """(layout, background) of an evaluation setting."""
     if setting in ("id", FEWSHOT):
         return "id", "id"
-    if setting == "position_ood":
-        return "position_ood", "id"
+    if setting == "position_ood" or setting in BANDS:
+        return setting, "id"
     if setting in BACKGROUND_OODS:
         return "id", setting
     raise ValueError(
-        f"setting: expected id, {FEWSHOT}, position_ood or one of {list(BACKGROUND_OODS)}, got {setting!r}"
+        f"setting: expected id, {FEWSHOT}, position_ood or one of {[*BACKGROUND_OODS, *BANDS]}, "
+        f"got {setting!r}"
     )
+
+
+def method_controls(method: str) -> tuple[str, ...]:
+    """The controls of ``method``: every method's blind one, and OmniD's scrambled geometry."""
+    return CONTROLS if method == "omnid" else ("blind",)
+
+
+def control_flags(
+    method: str, control: str, cameras: Sequence[str], calibration_file: Path | str
+) -> list[Flag]:
+    """Options that turn an evaluation of ``method``'s checkpoint into its ``control``: only the state can
+    drive it (blind), or its images are lifted with the wrong geometry (scrambled, OmniD only)."""
+    if control not in method_controls(method):
+        raise ValueError(
+            f"control of {method}: expected one of {list(method_controls(method))}, got {control!r}"
+        )
+    if method == "omnid":
+        why = {
+            "blind": "every camera turned away from the volume in its calibration (lerobot_omnid."
+            "benchmark.control_calibration): no anchor is visible, the images contribute nothing",
+            "scrambled": "the cameras' calibrations permuted (each gets the next camera's, none keeps "
+            "its own): real images lifted into the volume with the wrong geometry",
+        }[control]
+        return [(f"--policy.calibration_path={calibration_file}", why)]
+    why = "black images (every pixel zero) from every camera: only the state can drive the policy"
+    return [(f"--env.blackout_cameras=[{','.join(cameras)}]", why)]
+
+
+def control_setting(setting: str, control: str, control_settings: Sequence[str]) -> str | None:
+    """The setting whose ``control`` evaluation controls ``setting``, or None: its own where it is evaluated;
+    for a background OOD the ID one's under the blind control, which is the same evaluation (same env seeds,
+    hence the same layouts, and a blind policy sees no table)."""
+    if setting in control_settings:
+        return setting
+    if control == "blind" and setting in BACKGROUND_OODS and "id" in control_settings:
+        return "id"
+    return None
+
+
+def seed_folder(out: Path, train_seed: int) -> tuple[Path, str]:
+    """Folder and run-name prefix of one training seed's runs: ``out`` itself for ``TRAIN_SEED`` (the folders
+    of the runs made before training seeds were a dimension), ``out/train_seed<seed>/`` for the others."""
+    if train_seed == TRAIN_SEED:
+        return out, ""
+    return out / f"train_seed{train_seed}", f"train_seed{train_seed}/"
 
 
 @dataclass(frozen=True)
 class Run:
     """One command of the plan. ``name`` is unique (and names the log); ``needs`` lists runs whose output
-    this one reads; an eval run carries ``result`` = (model, task, setting) and its eval ``seed``, an offline
-    run (open-loop action error on held-out expert episodes, ``omnid-offline-eval``) its ``result``."""
+    this one reads; an eval run carries ``result`` = (model, task, setting), its eval ``seed``, the
+    ``train_seed`` of its model and its ``control`` ("" for the checkpoint as trained), an offline run
+    (open-loop action error on held-out expert episodes, ``omnid-offline-eval``) its ``result`` and
+    ``train_seed``. A "calibration" run writes a control's calibration file (``output``)."""
 
     name: str
-    kind: str  # "record" | "train" | "eval" | "prepare" | "offline"
+    kind: str  # "record" | "train" | "eval" | "prepare" | "calibration" | "offline"
     cmd: tuple[str, ...]
     output: Path
     needs: tuple[str, ...] = ()
     episodes: int = 0
     result: tuple[str, str, str] | None = None
     seed: int | None = None
+    train_seed: int = TRAIN_SEED
+    control: str = ""
 
 
 def is_done(run: Run) -> bool:
@@ -326,13 +384,17 @@ def is_done(run: Run) -> bool:
         return is_trained(run.output)
     if run.kind == "prepare":
         return (run.output / "config.json").is_file()
+    if run.kind == "calibration":
+        return run.output.is_file()
     if run.kind == "offline":
         return (run.output / OFFLINE_OUTPUT).is_file()
     return is_evaluated(run.output)
 
 
 def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run]:
-    """Every run of the benchmark. Each model's evaluations follow its training, so results come early."""
+    """Every run of the benchmark: the recordings, then per training seed (:func:`seed_folder`) the training
+    runs, each model's evaluations right after its training (so results come early), its controls and its
+    open-loop diagnostic."""
     runs: list[Run] = []
 
     def record(
@@ -343,23 +405,63 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
         cmd = record_command(task, episodes, cameras, p.image_size, root, seed, layout, background)
         runs.append(Run(f"record/{name}", "record", tuple(cmd), root, episodes=episodes))
 
+    for task in tasks:
+        record(f"{task}_bcde", task, TRAIN_CAMERAS, p.episodes, seed=0)
+    if p.ablations and TASK0 in tasks:
+        record(f"{TASK0}_a", TASK0, CAMERA_A, p.episodes, seed=0)  # the B-E set's episodes, seen by A
+    fewshot_tasks = (TASK0, TASK1) if p.fewshot and TASK0 in tasks else ()
+    for task in fewshot_tasks:
+        record(f"{task}_a_fewshot", task, CAMERA_A, p.fewshot_episodes, seed=FEWSHOT_SEED)
+    for setting in heldout_settings(p, tasks):
+        record(
+            heldout_dataset(TASK0, setting), TASK0, TRAIN_CAMERAS, p.heldout_episodes, HELDOUT_SEED, setting
+        )
+    for train_seed in p.train_seeds:
+        runs += plan_models(p, out, tasks, train_seed, fewshot_tasks)
+    return runs
+
+
+def heldout_settings(p: BenchmarkProfile, tasks: Sequence[str]) -> tuple[str, ...]:
+    """Task-0 settings of the open-loop diagnostic: every setting but the graded bands (the position-OOD
+    band holds the first two; the curve is measured by success)."""
+    if not p.heldout_episodes or TASK0 not in tasks:
+        return ()
+    return tuple(s for s in p.settings if s not in BANDS)
+
+
+def plan_models(
+    p: BenchmarkProfile, out: Path, tasks: Sequence[str], train_seed: int, fewshot_tasks: Sequence[str]
+) -> list[Run]:
+    """The runs of one training seed: training, evaluations, controls, fine-tuning, open-loop diagnostic."""
+    root, prefix = seed_folder(out, train_seed)
+    runs: list[Run] = []
+
     def train(
         folder: str, model: str, task: str, dataset: str, flags: list[str], steps: int, needs=()
     ) -> Run:
-        output = out / folder / model / task
-        root = out / "data" / dataset
-        cmd = train_command(root, output, flags, steps, p.batch_size, p.num_workers, seed=TRAIN_SEED)
-        run = Run(f"{folder}/{model}/{task}", "train", tuple(cmd), output, (f"record/{dataset}", *needs))
+        output = root / folder / model / task
+        data = out / "data" / dataset
+        cmd = train_command(data, output, flags, steps, p.batch_size, p.num_workers, seed=train_seed)
+        name = f"{prefix}{folder}/{model}/{task}"
+        run = Run(name, "train", tuple(cmd), output, (f"record/{dataset}", *needs), train_seed=train_seed)
         runs.append(run)
         return run
 
     def evaluate(
-        trained: Run, model: str, task: str, settings: Sequence[str], cameras: Sequence[str]
+        trained: Run,
+        model: str,
+        task: str,
+        settings: Sequence[str],
+        cameras: Sequence[str],
+        control: str = "",
+        control_options: Sequence[str] = (),
+        needs: Sequence[str] = (),
     ) -> None:
+        folder = f"eval_{control}" if control else "eval"
         for setting in settings:
             layout, background = setting_env(setting)
             for k in p.eval_seeds:
-                output = out / "eval" / model / task / setting / f"seed{k}"
+                output = root / folder / model / task / setting / f"seed{k}"
                 cmd = eval_command(
                     trained.output / CHECKPOINT_SUBDIR,
                     output,
@@ -371,50 +473,49 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
                     p.device,
                     background,
                     seed=k * EVAL_SEED_STRIDE,
-                    extra=(f"--env.episode_length={p.episode_length}",),
+                    extra=(f"--env.episode_length={p.episode_length}", *control_options),
                 )
-                name = f"eval/{model}/{task}/{setting}/seed{k}"
-                runs.append(
-                    Run(name, "eval", tuple(cmd), output, (trained.name,), 0, (model, task, setting), k)
+                name = f"{prefix}{folder}/{model}/{task}/{setting}/seed{k}"
+                result = (model, task, setting)
+                run = Run(name, "eval", tuple(cmd), output, (trained.name, *needs), 0, result, k, train_seed)
+                runs.append(dataclasses.replace(run, control=control))
+
+    def controls(trained: Run, method: str, cameras: Sequence[str]) -> None:
+        """Each control of ``method`` on task 0, in the control settings."""
+        settings = [s for s in p.control_settings if s in p.settings]
+        for control in method_controls(method) if settings else ():
+            needs: tuple[str, ...] = ()
+            calibration_file = root / "controls" / method / TASK0 / f"{control}.json"
+            if method == "omnid":
+                cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.control_calibration"]
+                cmd += ["--checkpoint", str(trained.output / CHECKPOINT_SUBDIR), "--control", control]
+                cmd += ["--out", str(calibration_file)]
+                name = f"{prefix}calibration/{method}/{TASK0}/{control}"
+                run = Run(
+                    name, "calibration", tuple(cmd), calibration_file, (trained.name,), train_seed=train_seed
                 )
+                runs.append(run)
+                needs = (run.name,)
+            options = [f for f, _ in control_flags(method, control, cameras, calibration_file)]
+            evaluate(trained, method, TASK0, settings, cameras, control, options, needs)
 
     def offline(trained: Run, model: str, task: str, settings: Sequence[str]) -> None:
         """Open-loop action error of ``trained`` on the held-out expert episodes of each setting."""
         for setting in settings:
             dataset = heldout_dataset(task, setting)
-            output = out / "offline" / model / task / setting
+            output = root / "offline" / model / task / setting
             cmd = [str(BIN / "omnid-offline-eval"), "--checkpoint", str(trained.output / CHECKPOINT_SUBDIR)]
             cmd += ["--root", str(out / "data" / dataset), "--episodes", str(p.heldout_episodes)]
             cmd += ["--device", p.device]
             cmd += ["--out", str(output / OFFLINE_OUTPUT)]
             needs = (trained.name, f"record/{dataset}")
+            name = f"{prefix}offline/{model}/{task}/{setting}"
             runs.append(
-                Run(
-                    f"offline/{model}/{task}/{setting}",
-                    "offline",
-                    tuple(cmd),
-                    output,
-                    needs,
-                    0,
-                    (model, task, setting),
-                )
+                Run(name, "offline", tuple(cmd), output, needs, 0, (model, task, setting), None, train_seed)
             )
 
     def common(method: str) -> list[str]:
         return [f"--policy.type={method}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
-
-    for task in tasks:
-        record(f"{task}_bcde", task, TRAIN_CAMERAS, p.episodes, seed=0)
-    if p.ablations and TASK0 in tasks:
-        record(f"{TASK0}_a", TASK0, CAMERA_A, p.episodes, seed=0)  # the B-E set's episodes, seen by A
-    fewshot_tasks = (TASK0, TASK1) if p.fewshot and TASK0 in tasks else ()
-    for task in fewshot_tasks:
-        record(f"{task}_a_fewshot", task, CAMERA_A, p.fewshot_episodes, seed=FEWSHOT_SEED)
-    heldout_settings = p.settings if p.heldout_episodes and TASK0 in tasks else ()
-    for setting in heldout_settings:
-        record(
-            heldout_dataset(TASK0, setting), TASK0, TRAIN_CAMERAS, p.heldout_episodes, HELDOUT_SEED, setting
-        )
 
     for task in tasks:
         for method in p.methods:
@@ -423,7 +524,8 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
             cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
             evaluate(trained, method, task, p.settings if task == TASK0 else ("id",), cameras)
             if task == TASK0:
-                offline(trained, method, task, heldout_settings)
+                controls(trained, method, cameras)
+                offline(trained, method, task, heldout_settings(p, tasks))
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
             flags = [f for f, _ in ablation_flags(name, p)]
@@ -433,12 +535,14 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     for method in p.methods:
         if method in NOT_FINETUNABLE:
             continue
-        start, start_run = out / "train" / method / TASK0 / CHECKPOINT_SUBDIR, f"train/{method}/{TASK0}"
+        start = root / "train" / method / TASK0 / CHECKPOINT_SUBDIR
+        start_run = f"{prefix}train/{method}/{TASK0}"
         if method != "omnid" and fewshot_tasks:  # a copy whose image input is camera A
-            src, start = start, out / "finetune" / method / "start_cam_a"
+            src, start = start, root / "finetune" / method / "start_cam_a"
             cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.checkpoint_cameras", "--src", str(src)]
             cmd += ["--dst", str(start), "--cameras", ",".join(CAMERA_A)]
-            runs.append(Run(f"prepare/{method}/cam_a", "prepare", tuple(cmd), start, (start_run,)))
+            name = f"{prefix}prepare/{method}/cam_a"
+            runs.append(Run(name, "prepare", tuple(cmd), start, (start_run,), train_seed=train_seed))
             start_run = runs[-1].name
         for task in fewshot_tasks:
             flags = [f"--policy.path={start}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]

@@ -1,72 +1,60 @@
-"""Tables laid out like the paper's (section 4) and a bar chart, from ``lerobot-eval``'s ``eval_info.json``.
+"""Markdown tables of the benchmark: the paper's layout (section 4), every success rate with its Wilson 95 %
+interval, OmniD against each other method with Fisher's exact test, each method against its controls, the
+position-shift curve and its area.
 
-Pure functions of their arguments (plus reading the given files): an evaluation is a :class:`EvalEntry`
-(which table cell it belongs to, which seed, where its ``eval_info.json`` is); entries of one cell (several
-eval seeds) are pooled: success rate = successful episodes / episodes over all of them.
+Pure functions of their arguments: pooled cells (:func:`lerobot_omnid.benchmark.results.collect`) or the
+evaluation records themselves (:class:`lerobot_omnid.benchmark.results.EvalRecord`), plus reading the given
+open-loop diagnostic files. Rates are printed in %, differences in percentage points (pp).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
-Key = tuple[str, str, str]
-"""(model, task, setting): a table cell. model: a method, an ablation or a method whose fine-tuned model
-the cell holds; setting: "id", "position_ood", "ood1".."ood4" or "fewshot_a"."""
+from lerobot_omnid.benchmark.results import CellResult, EvalEntry, EvalRecord, Key, collect, train_seeds
+from lerobot_omnid.benchmark.stats import Estimate, fisher_exact, rate_difference
 
 MISSING = "—"
 HOLD_LABEL = "(holding the measured pose)"
 NOT_APPLICABLE = "n/a"
-
-
-@dataclass(frozen=True)
-class EvalEntry:
-    key: Key
-    seed: int | None
-    path: Path  # an eval_info.json, which may not exist yet
-
-
-@dataclass(frozen=True)
-class CellResult:
-    successes: float  # successful episodes, over every seed of the cell
-    episodes: int
-    paths: tuple[Path, ...]
-
-    @property
-    def rate(self) -> float:
-        return 100.0 * self.successes / self.episodes
-
-
-def read_eval_info(path: Path) -> tuple[float, int]:
-    """(success rate in %, episodes) of one ``lerobot-eval`` run."""
-    overall = json.loads(Path(path).read_text())["overall"]
-    return float(overall["pc_success"]), int(overall["n_episodes"])
-
-
-def collect(entries: Iterable[EvalEntry]) -> dict[Key, CellResult]:
-    """Pool the entries whose ``eval_info.json`` exists, per cell."""
-    cells: dict[Key, CellResult] = {}
-    for entry in entries:
-        if not entry.path.is_file():
-            continue
-        rate, n = read_eval_info(entry.path)
-        old = cells.get(entry.key, CellResult(0.0, 0, ()))
-        cells[entry.key] = CellResult(
-            old.successes + rate * n / 100.0, old.episodes + n, (*old.paths, entry.path)
-        )
-    return cells
+Cell = CellResult | str | None
+"""A table cell: a result, ``NOT_APPLICABLE``, or None where nothing was evaluated (yet)."""
 
 
 def task_title(task: str) -> str:
     return task.replace("_", " ").title()
 
 
-def _fmt(results: Mapping[Key, CellResult], key: Key, not_applicable: set[Key]) -> str:
-    if key in not_applicable:
-        return NOT_APPLICABLE
-    return f"{results[key].rate:.1f}" if key in results else MISSING
+def format_rate(cell: CellResult) -> str:
+    """``50.0 (23.7-76.3)``: the success rate and its Wilson 95 % interval, in %."""
+    interval = cell.interval
+    return f"{cell.rate:.1f} ({100 * interval.low:.1f}-{100 * interval.high:.1f})"
+
+
+def format_counts(cell: CellResult) -> str:
+    """``5/10 (23.7-76.3 %)``."""
+    interval = cell.interval
+    return f"{cell.successes}/{cell.episodes} ({100 * interval.low:.1f}-{100 * interval.high:.1f} %)"
+
+
+def format_difference(estimate: Estimate) -> str:
+    """``+20.0 (-20.1 to 52.3)``: a difference of rates and its interval, in percentage points."""
+    return f"{100 * estimate.value:+.1f} ({100 * estimate.low:+.1f} to {100 * estimate.high:+.1f})"
+
+
+def format_p(p: float) -> str:
+    """Two significant digits, down to 1e-4."""
+    return f"{p:.2g}" if p >= 1e-4 else "<0.0001"
+
+
+def short_commit(commit: str | None) -> str:
+    """A commit's first 12 hex digits, its ``+dirty`` mark kept; ``?`` when not recorded."""
+    if commit is None:
+        return "?"
+    sha, plus, mark = commit.partition("+")
+    return sha[:12] + plus + mark
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -77,32 +65,57 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     ]
 
 
-def _bold_best(rows: list[list[str]], columns: Iterable[int]) -> None:
-    """Bold the highest number of each column (ties included), as the paper does."""
-    for c in columns:
-        values = [float(r[c]) for r in rows if r[c] not in (MISSING, NOT_APPLICABLE) and "/" not in r[c]]
-        if len(values) < 2 or min(values) == max(values):
-            continue
-        for r in rows:
-            if r[c] not in (MISSING, NOT_APPLICABLE) and "/" not in r[c] and float(r[c]) == max(values):
-                r[c] = f"**{r[c]}**"
+def _rows(labels: Sequence[str], cells: Sequence[Sequence[Cell]]) -> list[list[str]]:
+    """Formatted rows; the highest rate of each column is bold (ties included) where at least two rows have
+    a result and they differ, as the paper does."""
+    best = []
+    for column in zip(*cells, strict=True):
+        rates = [c.rate for c in column if isinstance(c, CellResult)]
+        best.append(max(rates) if len(rates) >= 2 and min(rates) < max(rates) else None)
+    rows = []
+    for label, row in zip(labels, cells, strict=True):
+        text = [label]
+        for c, top in zip(row, best, strict=True):
+            if isinstance(c, CellResult):
+                text.append(f"**{format_rate(c)}**" if c.rate == top else format_rate(c))
+            else:
+                text.append(c or MISSING)
+        rows.append(text)
+    return rows
+
+
+def pooled(cells: Iterable[CellResult]) -> CellResult | None:
+    """The cells' counts added up (None if there are none)."""
+    cells = list(cells)
+    if not cells:
+        return None
+    return CellResult(
+        sum(c.successes for c in cells),
+        sum(c.episodes for c in cells),
+        tuple(s for c in cells for s in c.sources),
+    )
 
 
 def id_table(
     results: Mapping[Key, CellResult], methods: Sequence[str], tasks: Sequence[str], labels: Mapping[str, str]
 ) -> list[str]:
-    """Success (%) per task in the ID setting, cameras B-E, with the average over tasks. An average over
-    fewer tasks than the table has (some not evaluated yet) is marked with *."""
-    rows = []
+    """Success (%) per task in the ID setting, cameras B-E, with the average: the episodes of every task
+    pooled (the mean of the tasks' rates when each has as many episodes). An average over fewer tasks than
+    the table has (some not evaluated yet) is marked with *."""
+    cells, averages = [], []
     for m in methods:
-        cells = [_fmt(results, (m, t, "id"), set()) for t in tasks]
-        rates = [results[(m, t, "id")].rate for t in tasks if (m, t, "id") in results]
-        average = f"{sum(rates) / len(rates):.1f}" if rates else MISSING
-        if rates and len(rates) < len(tasks):
-            average += "*"
-        rows.append([labels.get(m, m), *cells, average])
-    _bold_best(rows, range(1, len(tasks) + 1))
-    return _table(["Method", *(task_title(t) for t in tasks), "Average"], rows)
+        row = [results.get((m, t, "id")) for t in tasks]
+        cells.append(row)
+        present = [c for c in row if c is not None]
+        average = pooled(present)
+        averages.append(
+            MISSING if average is None else format_rate(average) + ("*" if len(present) < len(tasks) else "")
+        )
+    rows = _rows([labels.get(m, m) for m in methods], cells)
+    return _table(
+        ["Method", *(task_title(t) for t in tasks), "Average"],
+        [[*r, a] for r, a in zip(rows, averages, strict=True)],
+    )
 
 
 def generalisation_table(
@@ -114,33 +127,21 @@ def generalisation_table(
     not_applicable: set[Key],
     labels: Mapping[str, str],
 ) -> list[str]:
-    """Task 0: ID, position OOD, background OODs (one cell, 1/2/3/4), fine-tuned on camera A for task 0
-    and for task 1."""
-    rows = []
-    for m in methods:
-        background = "/".join(
-            f"{results[(m, task0, b)].rate:.0f}" if (m, task0, b) in results else MISSING for b in backgrounds
-        )
-        rows.append(
-            [
-                labels.get(m, m),
-                _fmt(results, (m, task0, "id"), not_applicable),
-                _fmt(results, (m, task0, "position_ood"), not_applicable),
-                background,
-                _fmt(results, (m, task0, "fewshot_a"), not_applicable),
-                _fmt(results, (m, task1, "fewshot_a"), not_applicable),
-            ]
-        )
-    _bold_best(rows, (1, 2, 4, 5))
-    header = [
-        "Method",
-        "Task 0 ID",
-        "Position OOD",
-        f"Background OOD ({'/'.join(backgrounds)})",
-        "Fine-tune Task 0-A",
-        "Fine-tune Task 1-A",
+    """Task 0: ID, position OOD, each background OOD, fine-tuned on camera A for task 0 and for task 1."""
+    keys = [
+        (task0, "id"),
+        (task0, "position_ood"),
+        *((task0, b) for b in backgrounds),
+        (task0, "fewshot_a"),
+        (task1, "fewshot_a"),
     ]
-    return _table(header, rows)
+    cells = [
+        [NOT_APPLICABLE if (m, t, s) in not_applicable else results.get((m, t, s)) for t, s in keys]
+        for m in methods
+    ]
+    header = ["Method", "Task 0 ID", "Position OOD", *(f"Background {b}" for b in backgrounds)]
+    header += ["Fine-tune Task 0-A", "Fine-tune Task 1-A"]
+    return _table(header, _rows([labels.get(m, m) for m in methods], cells))
 
 
 ABLATION_ROWS = ("ResNet-18", "ResNet-101", "OFG module", "Multi-view input fusion")
@@ -159,10 +160,125 @@ def ablation_table(results: Mapping[Key, CellResult], task0: str) -> list[str]:
         for i, name in enumerate(ABLATION_ROWS)
     ]
     success = [
-        "**Success rate (%)**",
-        *(_fmt(results, (m, task0, "id"), set()) for _, m, _ in ABLATION_COLUMNS),
+        format_rate(results[key]) if (key := (m, task0, "id")) in results else MISSING
+        for _, m, _ in ABLATION_COLUMNS
     ]
-    return _table(["", *(title for title, _, _ in ABLATION_COLUMNS)], [*rows, success])
+    return _table(
+        ["", *(title for title, _, _ in ABLATION_COLUMNS)], [*rows, ["**Success rate (%)**", *success]]
+    )
+
+
+def comparison_table(
+    records: Sequence[EvalRecord],
+    base: str,
+    others: Sequence[str],
+    cells: Sequence[tuple[str, str]],
+    labels: Mapping[str, str],
+) -> list[str]:
+    """``base`` (OmniD) against each of ``others`` in each (task, setting) both were evaluated in: counts
+    with Wilson intervals, the difference with Newcombe's interval and the two-sided Fisher p-value of the
+    episodes pooled over training seeds; with more than one training seed, the p-value of each too."""
+    seeds = train_seeds(records)
+    per_seed = len(seeds) > 1
+    results = collect(records)
+    by_seed = {s: collect(records, train_seed=s) for s in seeds} if per_seed else {}
+    rows = []
+    for other in others:
+        for task, setting in cells:
+            a, b = results.get((base, task, setting)), results.get((other, task, setting))
+            if a is None or b is None:
+                continue
+            row = [task, setting, labels.get(other, other), format_counts(a), format_counts(b)]
+            row += [format_difference(rate_difference(a.successes, a.episodes, b.successes, b.episodes))]
+            row += [format_p(fisher_exact(a.successes, a.episodes, b.successes, b.episodes))]
+            if per_seed:
+                row.append(", ".join(f"{s}: {_p(by_seed[s], base, other, task, setting)}" for s in seeds))
+            rows.append(row)
+    header = [
+        "Task",
+        "Setting",
+        "Against",
+        labels.get(base, base),
+        "Other",
+        f"{labels.get(base, base)} - other (pp)",
+    ]
+    header += ["Fisher p (pooled)"] + (["Fisher p per training seed"] if per_seed else [])
+    return _table(header, rows)
+
+
+def _p(results: Mapping[Key, CellResult], base: str, other: str, task: str, setting: str) -> str:
+    a, b = results.get((base, task, setting)), results.get((other, task, setting))
+    if a is None or b is None:
+        return MISSING
+    return format_p(fisher_exact(a.successes, a.episodes, b.successes, b.episodes))
+
+
+def controls_table(
+    records: Sequence[EvalRecord],
+    methods: Sequence[str],
+    task: str,
+    settings: Sequence[str],
+    control_of: Mapping[tuple[str, str], str],
+    labels: Mapping[str, str],
+    control_labels: Mapping[str, str],
+) -> list[str]:
+    """Each method against its own controls (the same checkpoint, see ``plan.control_flags``) on ``task``:
+    the margin of the checkpoint as trained over the control with Newcombe's interval, and the two-sided
+    Fisher p-value. ``control_of[(setting, control)]`` is the setting whose control evaluation controls
+    ``setting`` (the blind control of a background OOD is the ID one's)."""
+    trained = collect(records)
+    rows = []
+    for control, control_label in control_labels.items():
+        controlled = collect(records, control=control)
+        for m in methods:
+            for setting in settings:
+                a = trained.get((m, task, setting))
+                source = control_of.get((setting, control))
+                b = controlled.get((m, task, source)) if source else None
+                if a is None or b is None:
+                    continue
+                where = setting if source == setting else f"{setting} (control of {source})"
+                row = [labels.get(m, m), control_label, where, format_counts(a), format_counts(b)]
+                row += [format_difference(rate_difference(a.successes, a.episodes, b.successes, b.episodes))]
+                rows.append([*row, format_p(fisher_exact(a.successes, a.episodes, b.successes, b.episodes))])
+    header = ["Method", "Control", "Setting", "As trained", "Control", "Margin (pp)", "Fisher p"]
+    return _table(header, rows)
+
+
+def curve_area(
+    results: Mapping[Key, CellResult], model: str, task: str, bands: Mapping[str, tuple[float, float]]
+) -> tuple[float, CellResult | None] | None:
+    """Area under the success-vs-distance curve, normalised by the bands' extent: the width-weighted mean of
+    the band rates (%). Returns (area, pooled counts) where every band was evaluated, the pooled counts being
+    the area's own when every band has the same width and episodes (its interval and test then hold for the
+    area), else None; None if a band is missing."""
+    cells = [results.get((model, task, band)) for band in bands]
+    if any(c is None for c in cells):
+        return None
+    widths = [high - low for low, high in bands.values()]
+    area = sum(w * c.rate for w, c in zip(widths, cells, strict=True)) / sum(widths)
+    uniform = len({round(w, 9) for w in widths}) == 1 and len({c.episodes for c in cells}) == 1
+    return area, pooled(cells) if uniform else None
+
+
+def curve_table(
+    results: Mapping[Key, CellResult],
+    methods: Sequence[str],
+    task: str,
+    bands: Mapping[str, tuple[float, float]],
+    labels: Mapping[str, str],
+) -> list[str]:
+    """Success (%) per position band (distance outside the training square, cm) and the curve's area."""
+    cells = [[results.get((m, task, band)) for band in bands] for m in methods]
+    rows = _rows([labels.get(m, m) for m in methods], cells)
+    for m, row in zip(methods, rows, strict=True):
+        area = curve_area(results, m, task, bands)
+        if area is None:
+            row.append(MISSING)
+        else:
+            row.append(format_rate(area[1]) if area[1] is not None else f"{area[0]:.1f}")
+    header = ["Method", *(f"{low:g}-{high:g} cm" for low, high in bands.values()), "Area (mean over 0-10 cm)"]
+    return _table(header, rows)
 
 
 def offline_table(
@@ -201,73 +317,34 @@ def offline_table(
     return _table(["Method", *settings], [*rows, reference])
 
 
-def raw_table(entries: Sequence[EvalEntry], labels: Mapping[str, str]) -> list[str]:
-    """One row per evaluation run: its cell, seed, result and eval_info.json (or that it is missing)."""
+def raw_table(
+    entries: Sequence[EvalEntry], records: Sequence[EvalRecord], labels: Mapping[str, str]
+) -> list[str]:
+    """One row per evaluation: every record (this folder's and merged ones) with its counts, interval,
+    commit and source, then the planned evaluations not run yet."""
     rows = []
+    for r in sorted(records, key=lambda r: (r.key, r.control, r.train_seed or 0, r.eval_seed or 0)):
+        model, task, setting = r.key
+        counts = format_counts(CellResult(r.successes, r.episodes, (r.source,)))
+        seeds = [r.control, str(r.train_seed), str(r.eval_seed)]
+        rows.append(
+            [labels.get(model, model), task, setting, *seeds, counts, short_commit(r.commit), f"`{r.source}`"]
+        )
+    done = {r.source for r in records}
     for e in entries:
-        model, task, setting = e.key
-        if e.path.is_file():
-            rate, n = read_eval_info(e.path)
-            rows.append(
-                [labels.get(model, model), task, setting, str(e.seed), str(n), f"{rate:.1f}", f"`{e.path}`"]
-            )
-        else:
-            rows.append([labels.get(model, model), task, setting, str(e.seed), "", MISSING, "not run yet"])
-    return _table(
-        ["Model", "Task", "Setting", "Eval seed", "Episodes", "Success (%)", "eval_info.json"], rows
-    )
-
-
-def bar_chart(
-    results: Mapping[Key, CellResult],
-    methods: Sequence[str],
-    tasks: Sequence[str],
-    task0: str,
-    task1: str,
-    backgrounds: Sequence[str],
-    labels: Mapping[str, str],
-    path: Path,
-) -> Path:
-    """Grouped bars of success (%): ID per task; task-0 generalisation; ablation. Written as PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    panels = [
-        ("ID success, cameras B-E", [(task_title(t), t, "id") for t in tasks], methods),
-        (
-            f"{task_title(task0)}: generalisation and few-shot on camera A",
-            [("ID", task0, "id"), ("Pos. OOD", task0, "position_ood")]
-            + [(f"BG {b}", task0, b) for b in backgrounds]
-            + [("FT 0-A", task0, "fewshot_a"), ("FT 1-A", task1, "fewshot_a")],
-            methods,
-        ),
+        if str(e.path) not in done:
+            model, task, setting = e.key
+            seeds = [e.control, str(e.train_seed), str(e.seed)]
+            rows.append([labels.get(model, model), task, setting, *seeds, MISSING, "", "not run yet"])
+    header = [
+        "Model",
+        "Task",
+        "Setting",
+        "Control",
+        "Training seed",
+        "Eval seed",
+        "Successes",
+        "Commit",
+        "Source",
     ]
-    ablation = [(title, model) for title, model, _ in ABLATION_COLUMNS if (model, task0, "id") in results]
-    n_axes = len(panels) + bool(ablation)
-    fig, axes = plt.subplots(n_axes, 1, figsize=(11, 3.2 * n_axes), squeeze=False)
-    axes = axes[:, 0]
-    for ax, (title, groups, rows) in zip(axes, panels, strict=False):
-        width = 0.8 / max(len(rows), 1)
-        for i, m in enumerate(rows):
-            xs = [
-                g + (i - (len(rows) - 1) / 2) * width
-                for g, (_, t, s) in enumerate(groups)
-                if (m, t, s) in results
-            ]
-            ys = [results[(m, t, s)].rate for _, t, s in groups if (m, t, s) in results]
-            ax.bar(xs, ys, width, label=labels.get(m, m))
-        ax.set_xticks(range(len(groups)), [name for name, _, _ in groups])
-        ax.set(title=title, ylabel="success (%)", ylim=(0, 105))
-        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
-    if ablation:
-        ax = axes[-1]
-        ax.bar(range(len(ablation)), [results[(m, task0, "id")].rate for _, m in ablation], 0.5)
-        ax.set_xticks(range(len(ablation)), [title for title, _ in ablation])
-        ax.set(title=f"OmniD ablation, {task_title(task0)} ID", ylabel="success (%)", ylim=(0, 105))
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _table(header, rows)

@@ -1,0 +1,131 @@
+"""The benchmark's PNG charts, every success rate with its Wilson 95 % interval: grouped bars of the tables,
+and the position-shift curve (success against the object's distance outside the training square)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import ModuleType
+
+from lerobot_omnid.benchmark.report import ABLATION_COLUMNS, task_title
+from lerobot_omnid.benchmark.results import CellResult, Key
+
+
+def _pyplot() -> ModuleType:
+    """matplotlib's pyplot with the non-interactive Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _error_bars(cells: Sequence[CellResult]) -> list[list[float]]:
+    """(2, N) distances (%) from each rate down and up to the ends of its Wilson interval."""
+    return [
+        [c.rate - 100 * c.interval.low for c in cells],
+        [100 * c.interval.high - c.rate for c in cells],
+    ]
+
+
+def bar_chart(
+    results: Mapping[Key, CellResult],
+    methods: Sequence[str],
+    tasks: Sequence[str],
+    task0: str,
+    task1: str,
+    backgrounds: Sequence[str],
+    labels: Mapping[str, str],
+    path: Path,
+) -> Path:
+    """Grouped bars of success (%) with Wilson intervals: ID per task; task-0 generalisation; ablation."""
+    plt = _pyplot()
+    panels = [
+        ("ID success, cameras B-E", [(task_title(t), t, "id") for t in tasks], methods),
+        (
+            f"{task_title(task0)}: generalisation and few-shot on camera A",
+            [("ID", task0, "id"), ("Pos. OOD", task0, "position_ood")]
+            + [(f"BG {b}", task0, b) for b in backgrounds]
+            + [("FT 0-A", task0, "fewshot_a"), ("FT 1-A", task1, "fewshot_a")],
+            methods,
+        ),
+    ]
+    ablation = [(title, model) for title, model, _ in ABLATION_COLUMNS if (model, task0, "id") in results]
+    n_axes = len(panels) + bool(ablation)
+    fig, axes = plt.subplots(n_axes, 1, figsize=(11, 3.2 * n_axes), squeeze=False)
+    axes = axes[:, 0]
+    for ax, (title, groups, rows) in zip(axes, panels, strict=False):
+        width = 0.8 / max(len(rows), 1)
+        for i, m in enumerate(rows):
+            found = [(g, results[(m, t, s)]) for g, (_, t, s) in enumerate(groups) if (m, t, s) in results]
+            xs = [g + (i - (len(rows) - 1) / 2) * width for g, _ in found]
+            cells = [c for _, c in found]
+            ax.bar(
+                xs, [c.rate for c in cells], width, yerr=_error_bars(cells), capsize=2, label=labels.get(m, m)
+            )
+        ax.set_xticks(range(len(groups)), [name for name, _, _ in groups])
+        ax.set(title=title, ylabel="success (%)", ylim=(0, 105))
+        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    if ablation:
+        ax = axes[-1]
+        cells = [results[(m, task0, "id")] for _, m in ablation]
+        ax.bar(range(len(ablation)), [c.rate for c in cells], 0.5, yerr=_error_bars(cells), capsize=2)
+        ax.set_xticks(range(len(ablation)), [title for title, _ in ablation])
+        ax.set(title=f"OmniD ablation, {task_title(task0)} ID", ylabel="success (%)", ylim=(0, 105))
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def position_curve_chart(
+    results: Mapping[Key, CellResult],
+    methods: Sequence[str],
+    task: str,
+    bands: Mapping[str, tuple[float, float]],
+    labels: Mapping[str, str],
+    path: Path,
+) -> Path:
+    """Success (%) against the distance outside the training square (each band at its middle, cm), one
+    line per method with its Wilson intervals; the band edges are drawn as grid lines."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.5, 3.8))
+    offsets = {
+        m: (i - (len(methods) - 1) / 2) * 0.12 for i, m in enumerate(methods)
+    }  # cm, so bars do not hide
+    for m in methods:
+        found = [
+            ((low + high) / 2, results[(m, task, b)])
+            for b, (low, high) in bands.items()
+            if (m, task, b) in results
+        ]
+        if not found:
+            continue
+        xs = [x + offsets[m] for x, _ in found]
+        cells = [c for _, c in found]
+        ax.errorbar(
+            xs,
+            [c.rate for c in cells],
+            yerr=_error_bars(cells),
+            marker="o",
+            capsize=3,
+            label=labels.get(m, m),
+        )
+    edges = sorted({edge for band in bands.values() for edge in band})
+    ax.set_xticks(edges)
+    ax.grid(axis="x", alpha=0.4)
+    ax.set(
+        title=f"{task_title(task)}: success against distance outside the training square",
+        xlabel="distance outside the 10 cm training square, L-inf (cm)",
+        ylabel="success (%)",
+        ylim=(-2, 105),
+        xlim=(edges[0], edges[-1]),
+    )
+    ax.legend(fontsize="small")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

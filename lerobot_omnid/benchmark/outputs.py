@@ -1,0 +1,292 @@
+"""What ``omnid-benchmark`` writes from the finished runs of its plan: ``summary.json`` (this folder's
+evaluations), ``report.md`` (settings, the paper's tables with Wilson intervals, OmniD against each method
+with Fisher tests, the controls, the position-shift curve, the open-loop diagnostic, every run),
+``benchmark.png`` and ``position_curve.png`` (:mod:`lerobot_omnid.benchmark.charts`) and ``results.json``.
+Results of other folders (their ``summary.json``, e.g. copied under ``docs/results/``) are merged in.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from gym_omnid.constants import POSITION_BANDS, TRAIN_CAMERAS
+
+from lerobot_omnid.benchmark import charts, report, results
+from lerobot_omnid.benchmark.plan import (
+    ABLATIONS,
+    BACKGROUND_OODS,
+    BANDS,
+    CONTROL_LABELS,
+    CONTROLS,
+    EVAL_SEED_STRIDE,
+    FEWSHOT,
+    FEWSHOT_SEED,
+    HELDOUT_SEED,
+    LABELS,
+    METHODS,
+    NOT_FINETUNABLE,
+    OFFLINE_OUTPUT,
+    SETTINGS,
+    TASK0,
+    TASK1,
+    VQBET_CAMERA,
+    BenchmarkProfile,
+    Run,
+    ablation_flags,
+    control_flags,
+    control_setting,
+    finetune_flags,
+    heldout_settings,
+    method_controls,
+    method_flags,
+    seed_folder,
+)
+from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference
+
+BANDS_CM = {band: (100 * low, 100 * high) for band, (low, high) in POSITION_BANDS.items()}
+"""The graded position bands: distance outside the training square, cm."""
+
+
+def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
+    """What is run and how, with every non-default option and its reason."""
+    evals = ", ".join(f"{k} (env seeds {k * EVAL_SEED_STRIDE}+)" for k in p.eval_seeds)
+    parts = [f"{TASK0} settings {', '.join(p.settings)}"]
+    parts += ["few-shot on camera A"] if p.fewshot else []
+    parts += ["ablations"] if p.ablations else []
+    folders = ", ".join(f"{s} (runs in `./{seed_folder(Path(), s)[1]}`)" for s in p.train_seeds)
+    lines = [
+        f"Profile `{p.name}` on `{p.device}`: methods {', '.join(LABELS[m] for m in p.methods)}; "
+        f"tasks {', '.join(tasks)}; {', '.join(parts)}.",
+        "",
+        f"- Same for every method: datasets of {p.episodes} expert episodes per task (cameras B-E, "
+        f"{p.image_size}x{p.image_size} px, env seeds from 0), {p.steps} training steps, "
+        f"batch {p.batch_size}; evaluation: {p.eval_episodes} episodes per setting and eval seed, eval seeds "
+        f"{evals}, at most {p.episode_length} env steps (10 per second).",
+        "- Training seeds (the `--seed` of every `lerobot-train`, each a full repetition of the training "
+        f"runs and their evaluations on the same datasets and env seeds): {folders}.",
+        f"- Controls on {TASK0}, the same checkpoint evaluated in the settings "
+        f"{', '.join(p.control_settings) or '(none)'}: blind (only the state can drive it) for every method, "
+        "scrambled geometry (the cameras' calibrations permuted) for OmniD; a background OOD's blind control "
+        "is the ID one's (same env seeds and layouts; a blind policy sees no table).",
+        "- Position-shift curve: the graded bands "
+        + ", ".join(f"`{b}` ({low:g}-{high:g} cm)" for b, (low, high) in BANDS_CM.items() if b in p.settings)
+        + " outside the training square, L-inf; same success rule."
+        if any(b in p.settings for b in BANDS)
+        else "- Position-shift curve: no band in this run's settings.",
+        f"- Few-shot: the task-0 model fine-tuned for {p.finetune_steps} steps on {p.fewshot_episodes} "
+        f"camera-A episodes (env seeds from {FEWSHOT_SEED}) of {TASK0} and of {TASK1}, evaluated with "
+        "camera A."
+        if p.fewshot
+        else "- Few-shot fine-tuning: not in this profile.",
+        "- Cells pool the episodes of all eval and training seeds: success rate (%) with its Wilson 95 % "
+        "interval; differences in percentage points with Newcombe's hybrid score interval; p: two-sided "
+        "Fisher exact test. `—`: not run (yet); `n/a`: not applicable.",
+        f"- Open-loop diagnostic: {p.heldout_episodes} held-out expert episodes per {TASK0} setting "
+        "(the graded bands excepted)."
+        if p.heldout_episodes
+        else "- Open-loop diagnostic: off.",
+        "",
+        "| Method | Option | Why |",
+        "| --- | --- | --- |",
+    ]
+    rows = [(LABELS[m], f, why) for m in p.methods for f, why in method_flags(m, p)]
+    if p.control_settings:
+        for m in p.methods:
+            cameras = VQBET_CAMERA if m == "vqbet" else TRAIN_CAMERAS
+            for control in method_controls(m):
+                flags = control_flags(m, control, cameras, "<control calibration file>")
+                rows += [(f"{LABELS[m]} {CONTROL_LABELS[control]}", f, why) for f, why in flags]
+    if p.ablations:
+        base = {f for f, _ in method_flags("omnid", p)}
+        rows += [(LABELS[a], f, why) for a in ABLATIONS for f, why in ablation_flags(a, p) if f not in base]
+    if p.fewshot:
+        for m in p.methods:
+            if m in NOT_FINETUNABLE:
+                rows.append((f"{LABELS[m]} fine-tune", "(none)", NOT_FINETUNABLE[m]))
+            else:
+                rows += [(f"{LABELS[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
+    lines += [f"| {who} | `{flag}` | {why} |" for who, flag, why in rows]
+    notes = {
+        "act": "ACT: one observation step (the only value LeRobot's ACT supports); without pretrained "
+        "weights its frozen BatchNorm layers are identities (it has no GroupNorm option); its own optimiser "
+        "(AdamW 1e-5, no schedule) is kept.",
+        "vqbet": f"VQ-BeT: evaluated with camera {VQBET_CAMERA[0][-1].upper()} only (its single input); "
+        "its own optimiser settings are kept.",
+    }
+    lines += [""] + [f"- {notes[m]}" for m in p.methods if m in notes]
+    return lines
+
+
+def eval_entry(run: Run) -> results.EvalEntry:
+    return results.EvalEntry(
+        run.result, run.seed, run.output / "eval_info.json", run.train_seed, run.control, run.cmd
+    )
+
+
+def ordered_models(p: BenchmarkProfile, records: Sequence[results.EvalRecord]) -> tuple[str, ...]:
+    """The profile's methods and any other method found in merged records, in the paper's order."""
+    found = {r.key[0] for r in records}
+    return tuple(m for m in METHODS if m in p.methods or m in found)
+
+
+def comparison_lines(
+    records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str]
+) -> list[str]:
+    """OmniD against every other method, cell by cell, with Fisher tests (pooled and per training seed)."""
+    cells = [(t, "id") for t in tasks if t != TASK0]
+    cells = [(TASK0, s) for s in SETTINGS] + cells + [(TASK0, FEWSHOT), (TASK1, FEWSHOT)]
+    others = [m for m in methods if m != "omnid"]
+    return [
+        "",
+        "## OmniD against each method, cell by cell",
+        "",
+        "Episodes pooled over eval and training seeds; difference with Newcombe's 95 % interval (pp); "
+        "two-sided Fisher exact test.",
+        "",
+        *report.comparison_table(records, "omnid", others, cells, LABELS),
+    ]
+
+
+def curve_lines(
+    cells: Mapping[results.Key, results.CellResult], methods: Sequence[str], chart: Path
+) -> list[str]:
+    """The position-shift curve: its table, the area of each method against OmniD's, the chart."""
+    lines = [
+        "",
+        f"## Task 0 ({TASK0}): success against the distance outside the training square",
+        "",
+        "Key objects in graded bands outside the 10 cm training square (L-inf distance), same success rule. "
+        "Area: the mean success over 0-10 cm (width-weighted mean of the bands); with the same episodes in "
+        "every band it is the pooled rate, given with its Wilson interval.",
+        "",
+        *report.curve_table(cells, methods, TASK0, BANDS_CM, LABELS),
+    ]
+    omnid = report.curve_area(cells, "omnid", TASK0, BANDS_CM)
+    for m in methods:
+        other = report.curve_area(cells, m, TASK0, BANDS_CM)
+        if m == "omnid" or omnid is None or other is None or omnid[1] is None or other[1] is None:
+            continue
+        a, b = omnid[1], other[1]
+        difference = report.format_difference(
+            rate_difference(a.successes, a.episodes, b.successes, b.episodes)
+        )
+        p_value = report.format_p(fisher_exact(a.successes, a.episodes, b.successes, b.episodes))
+        lines += [
+            "",
+            f"Area, OmniD - {LABELS[m]}: {difference} pp, Fisher p = {p_value} (band episodes pooled).",
+        ]
+    return [*lines, "", f"![position-shift curve]({chart.name})"]
+
+
+def write_outputs(
+    p: BenchmarkProfile,
+    tasks: tuple[str, ...],
+    runs: list[Run],
+    out: Path,
+    also: Sequence[Path] = (),
+    commit: str | None = None,
+    command: Sequence[str] = (),
+) -> dict:
+    """summary.json (this folder's evaluations), then report.md, benchmark.png, position_curve.png and
+    results.json from them and from the summaries of ``also`` (other folders or summary files)."""
+    entries = [eval_entry(r) for r in runs if r.kind == "eval"]
+    own = [record for e in entries if (record := results.record_of(e)) is not None]
+    out.mkdir(parents=True, exist_ok=True)
+    results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
+    groups = [own]
+    for path in also:
+        profile, records = results.read_summary(path)
+        results.check_comparable(dataclasses.asdict(p), profile, str(path))
+        groups.append(records)
+    records = results.merge(groups)
+    methods = ordered_models(p, records)
+    cells = results.collect(records)
+    first_seed = p.train_seeds[0]
+    offline = {
+        r.result: r.output / OFFLINE_OUTPUT
+        for r in runs
+        if r.kind == "offline" and r.train_seed == first_seed
+    }
+    n_a = {(m, t, FEWSHOT) for m in NOT_FINETUNABLE for t in (TASK0, TASK1)} if p.fewshot else set()
+    chart = charts.bar_chart(
+        cells, methods, tasks, TASK0, TASK1, BACKGROUND_OODS, LABELS, out / "benchmark.png"
+    )
+    lines = ["# OmniD benchmark: OmniD vs DP, ACT, VQ-BeT", "", *settings_markdown(p, tasks), ""]
+    if also:
+        lines += [
+            f"Merged with {len(records) - len(own)} evaluations of: " + ", ".join(f"`{a}`" for a in also),
+            "",
+        ]
+    lines += ["## ID success rate (%) per task, cameras B-E", ""]
+    lines += report.id_table(cells, methods, tasks, LABELS)
+    if TASK0 in tasks:
+        lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
+        lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, n_a, LABELS)
+        if "omnid" in methods and len(methods) > 1:
+            lines += comparison_lines(records, methods, tasks)
+        if any(r.control for r in records):
+            control_of = {
+                (s, c): control_setting(s, c, p.control_settings) for s in SETTINGS for c in CONTROLS
+            }
+            lines += ["", f"## Task 0 ({TASK0}): each method against its controls", ""]
+            lines += report.controls_table(
+                records, methods, TASK0, SETTINGS, control_of, LABELS, CONTROL_LABELS
+            )
+        if any((m, TASK0, b) in cells for m in methods for b in BANDS):
+            curve = charts.position_curve_chart(
+                cells, methods, TASK0, BANDS_CM, LABELS, out / "position_curve.png"
+            )
+            lines += curve_lines(cells, methods, curve)
+    if offline:
+        lines += [
+            "",
+            f"## Task 0 ({TASK0}): open-loop action error on held-out expert episodes",
+            "",
+            f"Diagnostic next to the success rates: {p.heldout_episodes} expert episodes per setting "
+            f"(env seeds from {HELDOUT_SEED}, never trained on) replayed through each policy (training seed "
+            f"{first_seed}) as `lerobot-eval` runs it (`omnid-offline-eval`); mean TCP position error (cm) / "
+            "gripper error (0..1) of its action at every frame against the expert's. Lower is better; "
+            "informative even when every success rate is 0. The last row is the error of holding the "
+            "measured pose and gripper at every frame: a policy that does not beat it has not learned to act "
+            "yet.",
+            "",
+        ]
+        lines += report.offline_table(offline, methods, TASK0, heldout_settings(p, tasks), LABELS)
+    if p.ablations:
+        lines += ["", f"## Ablation: OmniD on task 0 ({TASK0}), ID success rate (%)", ""]
+        lines += report.ablation_table(cells, TASK0)
+    lines += ["", f"![success rates]({chart.name})", "", "## Evaluation runs", ""]
+    lines += report.raw_table(entries, records, LABELS)
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+
+    def cell_json(key: results.Key, cell: results.CellResult, control: str = "") -> dict:
+        model, task, setting = key
+        interval = cell.interval
+        return {
+            "model": model,
+            "task": task,
+            "setting": setting,
+            "control": control,
+            "successes": cell.successes,
+            "episodes": cell.episodes,
+            "success_rate": cell.rate,
+            "wilson_95": [100 * interval.low, 100 * interval.high],
+            "sources": list(cell.sources),
+        }
+
+    summary = {
+        "profile": dataclasses.asdict(p),
+        "tasks": list(tasks),
+        "train_seeds": results.train_seeds(records),
+        "cells": [cell_json(k, c) for k, c in cells.items()],
+        "controls": [
+            cell_json(k, c, control)
+            for control in CONTROLS
+            for k, c in results.collect(records, control).items()
+        ],
+    }
+    (out / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

@@ -1,0 +1,242 @@
+"""The benchmark's results as success counts: one :class:`EvalRecord` per finished ``lerobot-eval`` run, read
+from its ``eval_info.json`` or from a benchmark folder's ``summary.json``, merged across folders (runs made
+on other machines) and pooled per table cell.
+
+A finished evaluation leaves ``run_summary.json`` beside its ``eval_info.json`` (which cell, seeds, counts,
+the code commit and the command); a benchmark folder's ``summary.json`` holds every evaluation of that
+folder, so that copying it (under ``docs/results/``) is enough to combine results from several machines.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from lerobot_omnid.benchmark.stats import Estimate, wilson_interval
+
+Key = tuple[str, str, str]
+"""(model, task, setting): a table cell. model: a method, an ablation or a method whose fine-tuned model
+the cell holds; setting: "id", "position_ood", "position_band_k", "ood1".."ood4" or "fewshot_a"."""
+
+RUN_SUMMARY = "run_summary.json"
+"""Written beside a finished evaluation's ``eval_info.json``: :meth:`EvalRecord.to_json` of it."""
+SUMMARY = "summary.json"
+"""A benchmark folder's evaluations, profile, commit and command (:func:`write_summary`)."""
+SUMMARY_FORMAT = 1
+COMPARABLE = ("episodes", "image_size", "steps", "batch_size", "episode_length", "finetune_steps", "small")
+"""Profile fields that must agree between folders whose results are combined: the models are the same
+experiment; methods, tasks, settings, training and eval seeds and episodes per evaluation may differ."""
+
+
+@dataclass(frozen=True)
+class EvalEntry:
+    """A planned evaluation: its cell, eval ``seed``, ``eval_info.json`` (which may not exist yet), the
+    training seed of its model, its control ("" for the checkpoint as trained) and its command."""
+
+    key: Key
+    seed: int | None
+    path: Path
+    train_seed: int | None = None
+    control: str = ""
+    command: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class EvalRecord:
+    """A finished evaluation: ``successes`` of ``episodes`` for one cell, control, training and eval seed.
+    ``source``: the ``eval_info.json`` or summary file it was read from; ``commit``: the code commit that
+    ran it (None if not recorded)."""
+
+    key: Key
+    control: str
+    train_seed: int | None
+    eval_seed: int | None
+    successes: int
+    episodes: int
+    source: str
+    commit: str | None = None
+    command: tuple[str, ...] = ()
+
+    @property
+    def identity(self) -> tuple:
+        """What makes two records the same evaluation (the same episodes of the same model)."""
+        return (self.key, self.control, self.train_seed, self.eval_seed)
+
+    def to_json(self) -> dict[str, Any]:
+        model, task, setting = self.key
+        return {
+            "model": model,
+            "task": task,
+            "setting": setting,
+            "control": self.control,
+            "train_seed": self.train_seed,
+            "eval_seed": self.eval_seed,
+            "successes": self.successes,
+            "episodes": self.episodes,
+            "commit": self.commit,
+            "command": list(self.command),
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], source: str) -> EvalRecord:
+        """Parse :meth:`to_json`'s form; errors name ``source`` and the field."""
+        try:
+            record = cls(
+                (str(data["model"]), str(data["task"]), str(data["setting"])),
+                str(data["control"]),
+                data["train_seed"],
+                data["eval_seed"],
+                int(data["successes"]),
+                int(data["episodes"]),
+                source,
+                data.get("commit"),
+                tuple(data.get("command", ())),
+            )
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"{source}: expected an evaluation record with {e}, got {dict(data)}") from e
+        if not 0 <= record.successes <= record.episodes or record.episodes < 1:
+            raise ValueError(
+                f"{source}: successes/episodes: expected 0 <= successes <= episodes and episodes >= 1, "
+                f"got {record.successes}/{record.episodes}"
+            )
+        return record
+
+
+@dataclass(frozen=True)
+class CellResult:
+    """Pooled counts of a cell: over its eval seeds and (unless chosen) its training seeds."""
+
+    successes: int
+    episodes: int
+    sources: tuple[str, ...]
+
+    @property
+    def rate(self) -> float:
+        """Success rate in %."""
+        return 100.0 * self.successes / self.episodes
+
+    @property
+    def interval(self) -> Estimate:
+        """Wilson 95 % interval of the rate, as fractions."""
+        return wilson_interval(self.successes, self.episodes)
+
+
+def read_eval_info(path: Path) -> tuple[int, int]:
+    """(successful episodes, episodes) of one ``lerobot-eval`` run (its ``pc_success`` times its episodes)."""
+    overall = json.loads(Path(path).read_text())["overall"]
+    episodes = int(overall["n_episodes"])
+    return round(float(overall["pc_success"]) * episodes / 100.0), episodes
+
+
+def record_of(entry: EvalEntry, commit: str | None = None) -> EvalRecord | None:
+    """The record of a finished planned evaluation (None if not finished): counts from its
+    ``eval_info.json``, commit and command from its ``run_summary.json`` where it has one, else ``commit``
+    and the planned command."""
+    if not entry.path.is_file():
+        return None
+    successes, episodes = read_eval_info(entry.path)
+    summary_path = entry.path.with_name(RUN_SUMMARY)
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    command = tuple(summary.get("command", entry.command))
+    return EvalRecord(
+        entry.key,
+        entry.control,
+        entry.train_seed,
+        entry.seed,
+        successes,
+        episodes,
+        str(entry.path),
+        summary.get("commit", commit),
+        command,
+    )
+
+
+def collect(
+    records: Iterable[EvalRecord], control: str = "", train_seed: int | None = None
+) -> dict[Key, CellResult]:
+    """Pool the records of ``control`` per cell, over every training seed or only ``train_seed``'s."""
+    cells: dict[Key, CellResult] = {}
+    for r in records:
+        if r.control != control or (train_seed is not None and r.train_seed != train_seed):
+            continue
+        old = cells.get(r.key, CellResult(0, 0, ()))
+        cells[r.key] = CellResult(
+            old.successes + r.successes, old.episodes + r.episodes, (*old.sources, r.source)
+        )
+    return cells
+
+
+def train_seeds(records: Iterable[EvalRecord]) -> list[int]:
+    """The training seeds the records come from, sorted (records without one are left out)."""
+    return sorted({r.train_seed for r in records if r.train_seed is not None})
+
+
+def write_summary(
+    path: Path,
+    profile: Mapping[str, Any],
+    tasks: Sequence[str],
+    records: Sequence[EvalRecord],
+    commit: str | None,
+    command: Sequence[str],
+) -> Path:
+    """Write a benchmark folder's ``summary.json``: its profile and tasks, the code commit and command that
+    wrote it, and every evaluation record of the folder (only its own, never ones merged from elsewhere)."""
+    data = {
+        "format": SUMMARY_FORMAT,
+        "profile": dict(profile),
+        "tasks": list(tasks),
+        "commit": commit,
+        "command": list(command),
+        "evaluations": [r.to_json() for r in records],
+    }
+    path.write_text(json.dumps(data, indent=2) + "\n")
+    return path
+
+
+def read_summary(path: Path) -> tuple[dict[str, Any], list[EvalRecord]]:
+    """(profile, records) of a summary file, or of a benchmark folder's ``summary.json``."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / SUMMARY
+    if not path.is_file():
+        raise ValueError(
+            f"{path}: expected a benchmark summary (a folder's {SUMMARY}, written by every omnid-benchmark "
+            "run, e.g. `omnid-benchmark --report-only --out <folder>`), got no such file"
+        )
+    data = json.loads(path.read_text())
+    if data.get("format") != SUMMARY_FORMAT:
+        raise ValueError(f"{path}: format: expected {SUMMARY_FORMAT}, got {data.get('format')!r}")
+    return data["profile"], [EvalRecord.from_json(e, str(path)) for e in data["evaluations"]]
+
+
+def check_comparable(profile: Mapping[str, Any], other: Mapping[str, Any], source: str) -> None:
+    """Raise ValueError naming the field if ``other`` (from ``source``) is not the same experiment."""
+    for field in COMPARABLE:
+        if profile.get(field) != other.get(field):
+            raise ValueError(
+                f"{source}: {field}: expected {profile.get(field)!r} as in this benchmark's profile, got "
+                f"{other.get(field)!r} (results of different experiments are not combined)"
+            )
+
+
+def merge(groups: Iterable[Sequence[EvalRecord]]) -> list[EvalRecord]:
+    """Records of several folders in one list. The same evaluation found twice (a folder and its copied
+    summary) is kept once if its counts agree; if they differ, a ValueError names both sources."""
+    merged: dict[tuple, EvalRecord] = {}
+    for records in groups:
+        for r in records:
+            seen = merged.get(r.identity)
+            if seen is None:
+                merged[r.identity] = r
+            elif (seen.successes, seen.episodes) != (r.successes, r.episodes):
+                model, task, setting = r.key
+                raise ValueError(
+                    f"{model}/{task}/{setting} control {r.control or 'none'} training seed {r.train_seed} "
+                    f"eval seed {r.eval_seed}: expected one result, got {seen.successes}/{seen.episodes} in "
+                    f"{seen.source} and {r.successes}/{r.episodes} in {r.source} (give each machine its own "
+                    "training or eval seeds)"
+                )
+    return list(merged.values())
