@@ -97,3 +97,33 @@ def chain(start: Waypoint, moves: Sequence[Move], yaw: float, tilt: float = 0.0)
         previous = Waypoint(name, (float(xyz[0]), float(xyz[1]), float(xyz[2])), yaw, gripper, steps, tilt)
         plan.append(previous)
     return plan
+
+
+def pick_and_place(
+    start: Waypoint,
+    pick_xy: tuple[float, float],
+    hover_z: float,
+    grasp_z: float,
+    carry_z: float,
+    place_xy: tuple[float, float],
+    release_z: float,
+    hover_name: str,
+) -> list[Waypoint]:
+    """The plan of a top-down grasp carried to a place: hover over the object, descend, close and hold,
+    lift to ``carry_z``, carry, lower to ``release_z``, open and retreat (heights in metres, TCP)."""
+    (px, py), (qx, qy) = pick_xy, place_xy
+    return chain(
+        start,
+        [
+            (hover_name, (px, py, hover_z), OPEN, TRAVEL_SPEED),
+            ("descend", (px, py, grasp_z), OPEN, APPROACH_SPEED),
+            ("close", (px, py, grasp_z), CLOSED, None),
+            ("hold", (px, py, grasp_z), CLOSED, None),
+            ("lift", (px, py, carry_z), CLOSED, APPROACH_SPEED),
+            ("carry", (qx, qy, carry_z), CLOSED, TRAVEL_SPEED),
+            ("lower", (qx, qy, release_z), CLOSED, APPROACH_SPEED),
+            ("open", (qx, qy, release_z), OPEN, None),
+            ("retreat", (qx, qy, RETREAT_Z), OPEN, TRAVEL_SPEED),
+        ],
+        GRASP_YAW,
+    )

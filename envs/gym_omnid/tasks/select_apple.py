@@ -8,16 +8,7 @@ import mujoco
 import numpy as np
 
 from gym_omnid.tasks.base import Placement, Task, ring_wall_geoms, sample_layout, yaw_quat
-from gym_omnid.waypoints import (
-    APPROACH_SPEED,
-    CLOSED,
-    GRASP_YAW,
-    OPEN,
-    RETREAT_Z,
-    TRAVEL_SPEED,
-    Waypoint,
-    chain,
-)
+from gym_omnid.waypoints import Waypoint, pick_and_place
 
 APPLE_RADIUS = 0.035  # m
 ORANGE_RADIUS = 0.037  # m
@@ -150,18 +141,6 @@ class SelectApple(Task):
         ax, ay, az = positions["apple"]
         bx, by, bz = positions["bowl"]
         release_z = bz + BOWL_BASE_THICKNESS + APPLE_RELEASE_CLEARANCE + APPLE_RADIUS
-        return chain(
-            start,
-            [
-                ("hover_apple", (ax, ay, APPLE_HOVER_Z), OPEN, TRAVEL_SPEED),
-                ("descend", (ax, ay, az), OPEN, APPROACH_SPEED),
-                ("close", (ax, ay, az), CLOSED, None),
-                ("hold", (ax, ay, az), CLOSED, None),
-                ("lift", (ax, ay, APPLE_CARRY_Z), CLOSED, APPROACH_SPEED),
-                ("carry", (bx, by, APPLE_CARRY_Z), CLOSED, TRAVEL_SPEED),
-                ("lower", (bx, by, release_z), CLOSED, APPROACH_SPEED),
-                ("open", (bx, by, release_z), OPEN, None),
-                ("retreat", (bx, by, RETREAT_Z), OPEN, TRAVEL_SPEED),
-            ],
-            GRASP_YAW,
+        return pick_and_place(
+            start, (ax, ay), APPLE_HOVER_Z, az, APPLE_CARRY_Z, (bx, by), release_z, hover_name="hover_apple"
         )

@@ -10,16 +10,7 @@ import numpy as np
 
 from gym_omnid.robot import FINGER_TIP_BEYOND_TCP
 from gym_omnid.tasks.base import Placement, Task, sample_layout
-from gym_omnid.waypoints import (
-    APPROACH_SPEED,
-    CLOSED,
-    GRASP_YAW,
-    OPEN,
-    RETREAT_Z,
-    TRAVEL_SPEED,
-    Waypoint,
-    chain,
-)
+from gym_omnid.waypoints import Waypoint, pick_and_place
 
 TUBE_COLOURS = MappingProxyType(
     {  # name -> RGBA of the tube's liquid
@@ -214,18 +205,6 @@ class SelectChemistryTube(Task):
         tcp_above_bottom = TUBE_LENGTH - TUBE_GRASP_BELOW_TOP
         release_z = hz + HOLDER_BASE_TOP + TUBE_RELEASE_CLEARANCE + tcp_above_bottom
         hover_z = tz + TUBE_LENGTH / 2 + TUBE_HOVER_ABOVE_TOP + FINGER_TIP_BEYOND_TCP
-        return chain(
-            start,
-            [
-                ("hover_tube", (tx, ty, hover_z), OPEN, TRAVEL_SPEED),
-                ("descend", (tx, ty, grasp_z), OPEN, APPROACH_SPEED),
-                ("close", (tx, ty, grasp_z), CLOSED, None),
-                ("hold", (tx, ty, grasp_z), CLOSED, None),
-                ("lift", (tx, ty, carry_z), CLOSED, APPROACH_SPEED),
-                ("carry", (hx, hy, carry_z), CLOSED, TRAVEL_SPEED),
-                ("lower", (hx, hy, release_z), CLOSED, APPROACH_SPEED),
-                ("open", (hx, hy, release_z), OPEN, None),
-                ("retreat", (hx, hy, RETREAT_Z), OPEN, TRAVEL_SPEED),
-            ],
-            GRASP_YAW,
+        return pick_and_place(
+            start, (tx, ty), hover_z, grasp_z, carry_z, (hx, hy), release_z, hover_name="hover_tube"
         )
