@@ -6,25 +6,11 @@ import sys
 from pathlib import Path
 
 import torch
-from omnid_testing import make_tiny_dataset
+from omnid_testing import TINY_POLICY_FLAGS, make_tiny_dataset
 
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 LEROBOT_TRAIN = Path(sys.executable).parent / "lerobot-train"
-TINY_POLICY_FLAGS = [
-    "--policy.type=omnid",
-    "--policy.device=cpu",
-    "--policy.push_to_hub=false",
-    "--policy.volume_bounds=[[0.2,0.8],[-0.3,0.3],[0.0,0.3]]",
-    "--policy.volume_shape=[8,8,4]",
-    "--policy.d_model=32",
-    "--policy.num_heads=2",
-    "--policy.num_layers=1",
-    "--policy.down_dims=[32,64]",
-    "--policy.backbone_layer=3",
-    "--policy.noise_scheduler_type=DDIM",
-    "--policy.num_inference_steps=2",
-]
 
 
 def test_lerobot_train_cli_trains_omnid_and_checkpoint_loads(tmp_path):
