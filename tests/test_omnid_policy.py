@@ -11,7 +11,7 @@ from lerobot_omnid.calibration.schema import CalibrationError, CameraCalibration
 from lerobot_omnid.geometry import look_at
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
-from lerobot_omnid.policy.omni_feature_generator import plane_keypoints
+from lerobot_omnid.policy.plane_readout import plane_keypoints
 
 SIZE = 64
 

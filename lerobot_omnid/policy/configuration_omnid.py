@@ -20,11 +20,11 @@ from lerobot_omnid.calibration.schema import (
 from lerobot_omnid.cli import check_choice, check_positive_int
 from lerobot_omnid.geometry import AXES, PAPER_VOLUME_BOUNDS, FeatureVolume
 from lerobot_omnid.keys import image_key
+from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
 NOISE_SCHEDULERS = ("DDPM", "DDIM")
 PREDICTION_TYPES = ("epsilon", "sample")
-PLANE_READOUTS = ("flatten", "keypoints")
 
 
 @PreTrainedConfig.register_subclass("omnid")
@@ -123,15 +123,18 @@ class OmniDConfig(PreTrainedConfig):
             "flatten" (the paper's): all ``num_queries * compressed_channels`` values per observation
             step. "keypoints": a softmax over the plane per compressed channel and its expected plane
             coordinates, i.e. ``compressed_channels`` keypoints in the volume's normalised base-frame
-            coordinates (``2 * compressed_channels`` values). Measured on the ``mini`` data (a probe
-            regressing the apple's grasp position from the images, same backbone and OFG): the
-            flattened plane stays at chance for 120-150 steps, the keypoints learn from step 25; and
-            with the flattened plane the diffusion head ignored the images after 1000 steps.
+            coordinates (``2 * compressed_channels`` values); it exists because in short CPU runs the
+            flattened plane was ignored by the head (docs/results.md has the measurements).
+            "keypoint_features", "latent_queries", "bev_conv": richer readouts
+            (:mod:`lerobot_omnid.policy.plane_readout`): keypoints with the feature under each and a
+            presence logit; ``readout_latents`` learned queries attending over the plane; a small strided
+            CNN over the compressed plane with coordinate channels.
+        readout_dim: Values per keypoint feature / per latent query, and bev_conv's condition / 8.
+        readout_latents: Learned queries of the "latent_queries" readout.
         zero_init_compression: Start the compression at zero ("flatten" readout only; keypoints are
             bounded and start at the plane's centre), so that the plane enters the condition only
-            as it becomes useful. An untrained encoder's plane varies at random from image to image and
-            drowns the state for the diffusion head: in the benchmark's ``mini`` run, training loss at steps
-            50 / 75 was 0.081 / 0.038 with it and 0.187 / 0.145 without (DP: 0.068 / 0.032).
+            as it becomes useful: an untrained encoder's plane varies at random from image to image and
+            would drown the state for the diffusion head (docs/results.md has the measurements).
         query_chunk_size: Queries sampled at a time; bounds the memory of the sampling step.
         checkpoint_sampling: Recompute sampled features in the backward pass instead of storing them
             (much less memory at the paper's grid, about 30% more OFG compute).
@@ -194,6 +197,8 @@ class OmniDConfig(PreTrainedConfig):
     use_self_attention: bool = True
     compressed_channels: int = 1
     plane_readout: str = "flatten"
+    readout_dim: int = 8
+    readout_latents: int = 4
     zero_init_compression: bool = True
     query_chunk_size: int = 512
     checkpoint_sampling: bool = True
@@ -240,6 +245,8 @@ class OmniDConfig(PreTrainedConfig):
             "num_points",
             "ffn_dim",
             "compressed_channels",
+            "readout_dim",
+            "readout_latents",
             "query_chunk_size",
             "n_obs_steps",
             "horizon",

@@ -27,6 +27,12 @@ from lerobot_omnid.geometry import (
 )
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.deformable_sampling import multi_camera_deformable_sampling
+from lerobot_omnid.policy.plane_readout import (
+    BEVConvReadout,
+    KeypointFeatureReadout,
+    LatentQueryReadout,
+    plane_keypoints,
+)
 
 CAMERA_GEOMETRY_DIM = 6  # unit ray camera->pillar centre (3), its grid coordinates (2), visible anchors (1)
 
@@ -73,19 +79,6 @@ def camera_geometry(
         [ray, centre_grid.clamp(-2.0, 2.0), anchor_visible.float().mean(dim=-1, keepdim=True)], dim=-1
     )
     return CameraGeometry(anchor_grid, anchor_visible, descriptor, tuple(image_hw))
-
-
-def plane_keypoints(compressed: Tensor, plane_xy: Tensor) -> Tensor:
-    """Each channel's softmax over the plane, and the expected plane position under it (a spatial soft-argmax
-    on the bird's-eye plane: positions in the base frame, not in any image).
-
-    Args:
-        compressed: (B, Q, c) channel-compressed plane.
-        plane_xy: (Q, 2) each query's position on the plane, normalised to [-1, 1] within the volume.
-    Returns:
-        (B, c, 2) one keypoint per channel, in the coordinates of ``plane_xy``.
-    """
-    return torch.einsum("bqc,qk->bck", compressed.softmax(dim=1), plane_xy)
 
 
 class CameraCrossAttention(nn.Module):
@@ -273,13 +266,26 @@ class OmniFeatureGenerator(nn.Module):
             for _ in range(config.num_layers)
         )
         self.compress = nn.Linear(d, config.compressed_channels)
+        c = config.compressed_channels
+        # flatten and keypoints have no parameters of their own (and checkpoints saved with them none).
+        self.readout: nn.Module | None = None
         if config.plane_readout == "flatten":
             if config.zero_init_compression:  # see the config: the condition grows from zero as it trains
                 nn.init.zeros_(self.compress.weight)
                 nn.init.zeros_(self.compress.bias)
-            self.out_dim = volume.num_queries * config.compressed_channels
+            self.out_dim = volume.num_queries * c
+        elif config.plane_readout == "keypoints":
+            self.out_dim = 2 * c
         else:
-            self.out_dim = 2 * config.compressed_channels
+            if config.plane_readout == "keypoint_features":
+                self.readout = KeypointFeatureReadout(d, c, config.readout_dim)
+            elif config.plane_readout == "latent_queries":
+                self.readout = LatentQueryReadout(
+                    d, config.num_heads, config.readout_latents, config.readout_dim
+                )
+            else:
+                self.readout = BEVConvReadout(c, volume.plane_shape, config.readout_dim)
+            self.out_dim = self.readout.out_dim
 
     def forward(
         self,
@@ -311,6 +317,8 @@ class OmniFeatureGenerator(nn.Module):
         compressed = self.compress(queries)  # B, Q, c
         if self.plane_readout == "flatten":
             condition = compressed.flatten(1)  # B, Q*c
-        else:
+        elif self.plane_readout == "keypoints":
             condition = plane_keypoints(compressed, self.plane_xy).flatten(1)  # B, c, 2 -> B, 2c
+        else:
+            condition = self.readout(queries, compressed, self.plane_xy)
         return OFGOutput(queries, compressed, condition, grid, weights, geometry)
