@@ -197,27 +197,13 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def save_calibration_file(
-    path: str | Path,
-    calibrations: Mapping[str, CameraCalibration],
-    meta: Mapping[str, Mapping[str, Any]] | None = None,
-) -> Path:
-    """Write ``calibrations`` (keyed by camera name or feature key) in the schema of this module.
+def write_mapping_file(path: str | Path, data: Mapping[str, Any]) -> Path:
+    """Write ``data`` (numpy values made plain) as YAML for ``.yaml``/``.yml`` paths, JSON otherwise.
 
-    YAML for ``.yaml``/``.yml`` paths, JSON otherwise; ``T_cam_world`` is written (never
-    ``T_world_cam``). ``meta`` adds per-camera notes. The file is written to a temporary file and
-    moved into place, so an existing file is replaced whole or not at all.
+    The text goes to a temporary file moved into place, so an existing file is replaced whole or not at all.
     """
     path = Path(path)
-    meta = {image_key(k): v for k, v in (meta or {}).items()}
-    out: dict[str, Any] = {}
-    for cam, calib in calibrations.items():
-        key = image_key(cam)
-        calib.validate(key)
-        entry = {"image_size": list(calib.image_size), **calib.to_dict()}
-        if meta.get(key):
-            entry["meta"] = _plain(meta[key])
-        out[key] = entry
+    out = _plain(data)
     if path.suffix.lower() in YAML_SUFFIXES:
         if yaml is None:
             raise CalibrationError(f"writing {path} as YAML needs PyYAML (pip install pyyaml)")
@@ -233,3 +219,26 @@ def save_calibration_file(
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def save_calibration_file(
+    path: str | Path,
+    calibrations: Mapping[str, CameraCalibration],
+    meta: Mapping[str, Mapping[str, Any]] | None = None,
+) -> Path:
+    """Write ``calibrations`` (keyed by camera name or feature key) in the schema of this module.
+
+    YAML for ``.yaml``/``.yml`` paths, JSON otherwise; ``T_cam_world`` is written (never
+    ``T_world_cam``). ``meta`` adds per-camera notes. Written by :func:`write_mapping_file`, so an
+    existing file is replaced whole or not at all.
+    """
+    meta = {image_key(k): v for k, v in (meta or {}).items()}
+    out: dict[str, Any] = {}
+    for cam, calib in calibrations.items():
+        key = image_key(cam)
+        calib.validate(key)
+        entry = {"image_size": list(calib.image_size), **calib.to_dict()}
+        if meta.get(key):
+            entry["meta"] = meta[key]
+        out[key] = entry
+    return write_mapping_file(path, out)

@@ -1,21 +1,22 @@
 """Solving a camera's calibration from board detections with OpenCV: intrinsics from several views,
-extrinsics in the robot base frame from one view of the board at a known pose (``world_T_board``)."""
+extrinsics in the robot base frame from one view of the board at a known pose (``world_T_board``). A camera
+on the gripper: :mod:`lerobot_omnid.calibration.solve_hand_eye`."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
 from lerobot_omnid.calibration.board import MIN_CHARUCO_CORNERS, BoardDetection, BoardSpec, detect_board
-from lerobot_omnid.calibration.rig_file import (
-    read_mapping_file,
-)
+from lerobot_omnid.calibration.hand_eye import HandEyeCalibration
+from lerobot_omnid.calibration.rig_file import read_mapping_file
 from lerobot_omnid.calibration.schema import CalibrationError, CameraCalibration
 from lerobot_omnid.keys import image_key
 
@@ -68,14 +69,11 @@ def calibrate_intrinsics(detections: Sequence[BoardDetection], pinhole: bool = F
     return Intrinsics(K, np.zeros(0) if pinhole else dist.ravel()[:5], float(rms), tuple(view_rms))
 
 
-def estimate_cam_T_world(
-    detection: BoardDetection, world_T_board: np.ndarray, K: np.ndarray, distortion: np.ndarray
+def estimate_cam_T_board(
+    detection: BoardDetection, K: np.ndarray, distortion: np.ndarray
 ) -> tuple[np.ndarray, float]:
-    """``cam_T_world`` (4, 4) from one view of the board at a known pose, and its reprojection RMS (px).
-
-    ``cam_T_world = cam_T_board @ inv(world_T_board)``, with ``cam_T_board`` from ``solvePnP`` (IPPE for a
-    planar target, refined by Levenberg-Marquardt).
-    """
+    """``cam_T_board`` (4, 4) of one view and its reprojection RMS (px): ``solvePnP`` (IPPE for a planar
+    target, refined by Levenberg-Marquardt)."""
     obj = detection.xyz_board.astype(np.float64)
     img = detection.uv_pix.astype(np.float64).reshape(-1, 1, 2)
     ok, rvec, tvec = cv2.solvePnP(obj, img, K, distortion, flags=cv2.SOLVEPNP_IPPE)
@@ -87,6 +85,15 @@ def estimate_cam_T_world(
     cam_T_board = np.eye(4)
     cam_T_board[:3, :3] = cv2.Rodrigues(rvec)[0]
     cam_T_board[:3, 3] = tvec.ravel()
+    return cam_T_board, rms
+
+
+def estimate_cam_T_world(
+    detection: BoardDetection, world_T_board: np.ndarray, K: np.ndarray, distortion: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """``cam_T_world`` (4, 4) from one view of the board at a known pose, and its reprojection RMS (px):
+    ``cam_T_world = cam_T_board @ inv(world_T_board)``, ``cam_T_board`` from :func:`estimate_cam_T_board`."""
+    cam_T_board, rms = estimate_cam_T_board(detection, K, distortion)
     return cam_T_board @ np.linalg.inv(world_T_board), rms
 
 
@@ -176,6 +183,48 @@ def _read_image(path: Path) -> np.ndarray:
     return image
 
 
+def check_pose_board(board: BoardSpec) -> None:
+    """Refuse a board whose pose cannot be read from an image (a checkerboard symmetric under 180 degrees)."""
+    if board.orientation_ambiguous:
+        raise CalibrationError(
+            f"--pattern {board.cols}x{board.rows}: a checkerboard with both inner corner counts "
+            f"{'odd' if board.cols % 2 else 'even'} looks the same turned by 180 degrees, so its pose is "
+            f"ambiguous; use one odd and one even count (e.g. 9x6) or a ChArUco board"
+        )
+
+
+def detect_views(camera: str, board: BoardSpec, paths: Sequence[Path]) -> dict[Path, BoardDetection]:
+    """The board found in each image (images without it are left out and listed); shows progress."""
+    detections, missed = {}, []
+    for path in tqdm(paths, desc=f"{camera}: finding the board", unit="image"):
+        found = detect_board(_read_image(path), board)
+        if found is None:
+            missed.append(path)
+        else:
+            detections[path] = found
+    if missed:
+        print(f"{camera}: no board found in {len(missed)} image(s): {', '.join(map(str, missed[:5]))}")
+    return detections
+
+
+def fit_intrinsics(
+    camera: str, detections: Mapping[Path, BoardDetection], pinhole: bool
+) -> tuple[np.ndarray, np.ndarray, tuple[int, int], dict[str, Any]]:
+    """``K``, distortion, image size (h, w) and notes for the calibration file's ``meta``, from board views
+    (:func:`calibrate_intrinsics`); warns when the reprojection error is high."""
+    used = list(detections)
+    result = calibrate_intrinsics(list(detections.values()), pinhole=pinhole)
+    worst = int(np.argmax(result.view_rms_px))
+    if result.rms_px > MAX_GOOD_RMS_PX:
+        print(
+            f"warning: {camera}: intrinsics reprojection RMS {result.rms_px:.2f} px is high (worst: "
+            f"{used[worst]}, {result.view_rms_px[worst]:.2f} px); check focus, motion blur and the "
+            f"board's flatness"
+        )
+    meta = {"intrinsics_views": len(used), "intrinsics_rms_px": result.rms_px, "pinhole_fit": pinhole}
+    return result.K, result.distortion, detections[used[0]].image_size, meta
+
+
 def calibrate_camera(
     camera: str,
     board: BoardSpec,
@@ -183,39 +232,19 @@ def calibrate_camera(
     extrinsics_image: Path,
     world_T_board: np.ndarray,
     pinhole: bool = False,
-    intrinsics: CameraCalibration | None = None,
+    intrinsics: CameraCalibration | HandEyeCalibration | None = None,
 ) -> CameraResult:
-    """Intrinsics from ``intrinsics_images`` (or reuse ``intrinsics``), then ``T_cam_world`` from one view of
-    the board at ``world_T_board``. Shows progress; raises :class:`CalibrationError` naming the image."""
-    if board.orientation_ambiguous:
-        raise CalibrationError(
-            f"--pattern {board.cols}x{board.rows}: a checkerboard with both inner corner counts "
-            f"{'odd' if board.cols % 2 else 'even'} looks the same turned by 180 degrees, so its pose is "
-            f"ambiguous; use one odd and one even count (e.g. 9x6) or a ChArUco board"
-        )
+    """Intrinsics from ``intrinsics_images`` (or reuse those of ``intrinsics``), then ``T_cam_world`` from one
+    view of the board at ``world_T_board``. Shows progress; raises :class:`CalibrationError` naming the
+    image."""
+    check_pose_board(board)
     key = image_key(camera)
     meta: dict = {"tool": "omnid-calibrate", "board": board.describe()}
     if intrinsics is None:
-        detections, used, missed = [], [], []
-        for path in tqdm(intrinsics_images, desc=f"{camera}: finding the board", unit="image"):
-            found = detect_board(_read_image(path), board)
-            if found is None:
-                missed.append(path)
-            else:
-                detections.append(found)
-                used.append(path)
-        if missed:
-            print(f"{camera}: no board found in {len(missed)} image(s): {', '.join(map(str, missed[:5]))}")
-        result = calibrate_intrinsics(detections, pinhole=pinhole)
-        K, distortion, image_size = result.K, result.distortion, detections[0].image_size
-        meta.update(intrinsics_views=len(detections), intrinsics_rms_px=result.rms_px, pinhole_fit=pinhole)
-        worst = int(np.argmax(result.view_rms_px))
-        if result.rms_px > MAX_GOOD_RMS_PX:
-            print(
-                f"warning: {camera}: intrinsics reprojection RMS {result.rms_px:.2f} px is high (worst: "
-                f"{used[worst]}, {result.view_rms_px[worst]:.2f} px); check focus, motion blur and the "
-                f"board's flatness"
-            )
+        K, distortion, image_size, notes = fit_intrinsics(
+            camera, detect_views(camera, board, intrinsics_images), pinhole
+        )
+        meta.update(notes)
     else:
         K, image_size = np.asarray(intrinsics.K), intrinsics.image_size
         distortion = np.asarray(intrinsics.distortion, np.float64)
