@@ -21,6 +21,7 @@ import gymnasium as gym
 
 # Importing gym_omnid.constants imports gym_omnid, which registers the gym ids (gymnasium only, cheap).
 from gym_omnid.calibration import EXTRINSICS_OBS_PREFIX, INTRINSICS_OBS_PREFIX
+from gym_omnid.camera_offsets import check_camera_offsets
 from gym_omnid.constants import (
     ACTION_DIM,
     ALL_CAMERAS,
@@ -123,6 +124,13 @@ class OmniDEnvConfig(EnvConfig):
             columns ``omnid-record --per-frame-calibration`` writes. ``--env.per_frame_calibration=true``.
         blackout_cameras: Observed cameras whose images are all black (zero pixels), for a control in which
             only the state can drive the policy. Default: none. ``--env.blackout_cameras='[cam_b,cam_c]'``.
+        blackout_from_step: The ``blackout_cameras`` go black from this env step of each episode on (0: from
+            the first observation), a camera dying mid-episode. ``--env.blackout_from_step=100``.
+        camera_offsets: Cameras moved after calibration (a bumped camera: the images change, the policy's
+            calibration does not): per camera ``[rx, ry, rz, tx, ty, tz]``, a rotation vector in degrees
+            and a translation in metres in the camera's OpenCV frame, ``T_cam_world' = [R(r) | t] @
+            T_cam_world`` (``gym_omnid.camera_offsets``). Default: none.
+            ``--env.camera_offsets='{cam_b: [0,0,2,0.02,0,0]}'``.
         episode_length: Time limit of an episode, env steps (at ``fps`` steps per second).
         fps: Control rate, steps per second; fixed by the env (10 Hz).
         render_mode: Gymnasium render mode; ``"rgb_array"`` gives ``lerobot-eval`` its videos (a mosaic
@@ -137,6 +145,8 @@ class OmniDEnvConfig(EnvConfig):
     rig: str = DEFAULT_RIG
     per_frame_calibration: bool = False
     blackout_cameras: list[str] = field(default_factory=list)
+    blackout_from_step: int = 0
+    camera_offsets: dict[str, list[float]] = field(default_factory=dict)
     episode_length: int = MAX_EPISODE_STEPS
     fps: int = CONTROL_FPS
     render_mode: str = "rgb_array"
@@ -155,6 +165,15 @@ class OmniDEnvConfig(EnvConfig):
                 f"`per_frame_calibration`: expected true or false, got {self.per_frame_calibration!r}"
             )
         self.blackout_cameras = validate_blackout_cameras(self.blackout_cameras, self.cameras)
+        if isinstance(self.blackout_from_step, bool) or not isinstance(self.blackout_from_step, int):
+            raise ValueError(f"`blackout_from_step`: expected an int >= 0, got {self.blackout_from_step!r}")
+        if self.blackout_from_step < 0 or (self.blackout_from_step and not self.blackout_cameras):
+            raise ValueError(
+                "`blackout_from_step`: expected an int >= 0, and 0 without `blackout_cameras`, got "
+                f"{self.blackout_from_step!r} with blackout_cameras {self.blackout_cameras}"
+            )
+        offsets = check_camera_offsets(self.camera_offsets)  # its errors name camera_offsets and the camera
+        self.camera_offsets = {cam: list(offset) for cam, offset in offsets.items()}
         check_positive_int("episode_length", self.episode_length)
         if self.fps != CONTROL_FPS:
             raise ValueError(
@@ -198,6 +217,8 @@ class OmniDEnvConfig(EnvConfig):
             "rig": self.rig,
             "per_frame_calibration": self.per_frame_calibration,
             "blackout_cameras": tuple(self.blackout_cameras),
+            "blackout_from_step": self.blackout_from_step,
+            "camera_offsets": {cam: tuple(offset) for cam, offset in self.camera_offsets.items()},
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
         }

@@ -74,6 +74,8 @@ def test_features_for_camera_subset():
         "rig": "default",
         "per_frame_calibration": False,
         "blackout_cameras": (),
+        "blackout_from_step": 0,
+        "camera_offsets": {},
         "render_mode": "rgb_array",
         "max_episode_steps": 30,
     }
@@ -94,6 +96,10 @@ def test_features_for_camera_subset():
         ({"blackout_cameras": ["cam_a"]}, "blackout_cameras", "['cam_a']"),
         ({"blackout_cameras": ["cam_b", "cam_b"]}, "blackout_cameras", "['cam_b', 'cam_b']"),
         ({"blackout_cameras": "cam_b"}, "blackout_cameras", "'cam_b'"),
+        ({"blackout_from_step": 5}, "blackout_from_step", "5"),
+        ({"blackout_from_step": -1, "blackout_cameras": ["cam_b"]}, "blackout_from_step", "-1"),
+        ({"camera_offsets": {"cam_z": [0] * 6}}, "camera_offsets", "'cam_z'"),
+        ({"camera_offsets": {"cam_b": [0, 0, 1]}}, r"camera_offsets\[cam_b\]", "[0, 0, 1]"),
         ({"episode_length": 0}, "episode_length", "0"),
         ({"fps": 30}, "fps", "30"),
         ({"render_mode": "human"}, "render_mode", "'human'"),
@@ -117,6 +123,11 @@ def test_cli_parsing_of_camera_list():
     assert cfg.env.cameras == ["cam_b", "cam_c"] and cfg.env.blackout_cameras == ["cam_c"]
     assert cfg.env.gym_kwargs["blackout_cameras"] == ("cam_c",)
     assert set(cfg.env.features) == {"action", "agent_pos", "pixels/cam_b", "pixels/cam_c"}
+    # The robustness options: a camera dying mid-episode, a bumped camera.
+    robust = ["--env.blackout_from_step=7", '--env.camera_offsets={"cam_b":[0,0,2,0.02,0,0]}']
+    cfg = draccus.parse(Cli, args=[*args, "--env.blackout_cameras=[cam_c]", *robust])
+    assert cfg.env.gym_kwargs["blackout_from_step"] == 7
+    assert cfg.env.gym_kwargs["camera_offsets"] == {"cam_b": (0.0, 0.0, 2.0, 0.02, 0.0, 0.0)}
 
 
 def test_make_env_builds_and_steps():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import atexit
 import weakref
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -13,6 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from gym_omnid.calibration import calibration_observation, mujoco_camera_calibration
+from gym_omnid.camera_offsets import apply_camera_offsets, check_camera_offsets
 from gym_omnid.constants import (
     ACTION_DIM,
     ACTION_NAMES,
@@ -116,6 +117,17 @@ def _blackout_cameras(value: Sequence[str], cameras: tuple[str, ...]) -> tuple[s
     return blackout
 
 
+def _blackout_from_step(value: int, blackout: tuple[str, ...]) -> int:
+    """Validate ``blackout_from_step``: an int >= 0; above 0 only with ``blackout_cameras`` to black out."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+        raise ValueError(f"blackout_from_step: expected an int >= 0 (env steps), got {value!r}")
+    if value and not blackout:
+        raise ValueError(
+            f"blackout_from_step: expected 0 without blackout_cameras (nothing to black out), got {value}"
+        )
+    return int(value)
+
+
 def _close_at_exit(env_ref: weakref.ref) -> None:
     """Close a still-open env before MuJoCo's own exit hook terminates the EGL display."""
     env = env_ref()
@@ -148,6 +160,11 @@ class OmniDEnv(gym.Env):
         image_size: int (square) or (height, width), pixels.
         blackout_cameras: observed cameras whose observed pixels are all zero (black), for controls in which
             only the state can drive a policy; ``render()`` still shows what they see. Default: none.
+        blackout_from_step: the ``blackout_cameras`` go black from this env step of every episode on (0: the
+            observation of ``reset``; k: the observation after the k-th ``step``), a camera dying mid-episode.
+        camera_offsets: cameras moved from their placement by a small rigid delta, per camera ``[rx, ry, rz,
+            tx, ty, tz]`` (rotation vector in degrees, translation in metres, camera frame;
+            :mod:`gym_omnid.camera_offsets`): a bumped camera. ``camera_calibration`` is the moved camera's.
         rig: placements of the fixed cameras, one of ``RIGS`` (see :mod:`gym_omnid.rigs`).
         per_frame_calibration: add each observed camera's calibration to every observation.
         render_mode: ``"rgb_array"`` (``render()`` returns a mosaic of the observed cameras) or None.
@@ -166,6 +183,8 @@ class OmniDEnv(gym.Env):
         per_frame_calibration: bool = False,
         render_mode: str | None = "rgb_array",
         blackout_cameras: Sequence[str] = (),
+        blackout_from_step: int = 0,
+        camera_offsets: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self.task: str = _choice("task", task, TASKS)
         self.cameras: tuple[str, ...] = _cameras(cameras)
@@ -173,6 +192,8 @@ class OmniDEnv(gym.Env):
         self.background: str = _choice("background", background, BACKGROUNDS)
         self.image_size: tuple[int, int] = _image_size(image_size)
         self.blackout_cameras: tuple[str, ...] = _blackout_cameras(blackout_cameras, self.cameras)
+        self.blackout_from_step: int = _blackout_from_step(blackout_from_step, self.blackout_cameras)
+        self.camera_offsets: dict[str, tuple[float, ...]] = check_camera_offsets(camera_offsets)
         self.rig: str = _choice("rig", rig, RIGS)
         if not isinstance(per_frame_calibration, bool):
             raise ValueError(f"per_frame_calibration: expected True or False, got {per_frame_calibration!r}")
@@ -184,6 +205,7 @@ class OmniDEnv(gym.Env):
         self._task = make_task(task)
         mjcf = build_mjcf(self._task, self.image_size, RIG_PLACEMENTS[self.rig])
         self.model = mujoco.MjModel.from_xml_string(mjcf)
+        apply_camera_offsets(self.model, self.camera_offsets)
         self.data = mujoco.MjData(self.model)
         self._task.bind(self.model)
         self._ik = DampedLeastSquaresIK(self.model, TCP_SITE, ARM_JOINTS)
@@ -195,6 +217,7 @@ class OmniDEnv(gym.Env):
         self._q_target = np.array(HOME_JOINTS)
         self._renderer: mujoco.Renderer | None = None
         self._last_pixels: dict[str, np.ndarray] | None = None
+        self._steps = 0  # env steps since the last reset
         self.set_background(self.background)
 
         height, width = self.image_size
@@ -220,6 +243,7 @@ class OmniDEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         """Home the arm, sample a layout with ``self.np_random`` and let the objects settle."""
         super().reset(seed=seed)
+        self._steps = 0
         mujoco.mj_resetData(self.model, self.data)
         self._reset_robot()
         self._task.reset(self.data, self.np_random, self.layout)
@@ -239,6 +263,7 @@ class OmniDEnv(gym.Env):
         self.data.ctrl[self._finger_ctrl] = (1.0 - action[9]) * FINGER_TRAVEL
         mujoco.mj_step(self.model, self.data, nstep=N_SUBSTEPS)
         self._task.after_step(self.data)
+        self._steps += 1
         success = self._task.is_success(self.data)
         return self._observation(), float(success), success, False, {"is_success": success}
 
@@ -273,7 +298,8 @@ class OmniDEnv(gym.Env):
     def camera_calibration(self, cam: str) -> dict:
         """OpenCV calibration of camera ``cam`` (one of ``ALL_CAMERAS``) for this env's image size, now.
 
-        The fixed cameras' never changes; the wrist camera's follows the arm: after ``reset`` or ``step``
+        The fixed cameras' never changes (their ``camera_offsets`` included); the wrist camera's follows
+        the arm: after ``reset`` or ``step``
         it is the one of the images just observed (MuJoCo's camera poses are those the renderer used).
         Returns ``{"K": (3, 3) float64, "T_cam_world": (4, 4) float64, "image_size": (height, width)}``
         where ``uv = K @ (T_cam_world @ X)[:3]`` divided by its third component, pixel centres at
@@ -349,7 +375,8 @@ class OmniDEnv(gym.Env):
 
     def _observation(self) -> dict:
         """Render the cameras and assemble ``{"pixels", "agent_pos"}`` in the ``state_names`` layout (the
-        ``blackout_cameras`` black), with the cameras' calibration entries when ``per_frame_calibration``."""
+        ``blackout_cameras`` black from ``blackout_from_step`` on), with the cameras' calibration entries
+        when ``per_frame_calibration``."""
         self._last_pixels = self._render_cameras()
         tcp_xyz, world_R_tcp = self.tcp_pose()
         finger_gap = float(np.sum(self.data.qpos[self._finger_qpos]))
@@ -361,10 +388,8 @@ class OmniDEnv(gym.Env):
                 self.data.qpos[self._arm_qpos],
             ]
         ).astype(np.float32)
-        pixels = {
-            cam: np.zeros_like(image) if cam in self.blackout_cameras else image
-            for cam, image in self._last_pixels.items()
-        }
+        black = self.blackout_cameras if self._steps >= self.blackout_from_step else ()
+        pixels = {cam: np.zeros_like(im) if cam in black else im for cam, im in self._last_pixels.items()}
         obs = {"pixels": pixels, "agent_pos": state}
         if self.per_frame_calibration:
             for cam in self.cameras:

@@ -1,0 +1,356 @@
+"""``omnid-robustness``: success of trained checkpoints under what real rigs do, run with ``lerobot-eval``.
+
+For each checkpoint (OmniD, and stock LeRobot policies such as ``diffusion`` where a perturbation applies),
+in one task's ID setting with the same env seeds throughout:
+
+1. calibration error (OmniD): the policy is given a perturbed calibration file, the scene is unchanged;
+   levels 0, 0.5, 1, 2, 4: every camera moved by exactly L cm in a random direction and turned by exactly
+   L degrees about a random axis, several seeded draws per level (files under ``<out>/calibration/``);
+2. bumped cameras: the scene's cameras moved by the same offsets (``--env.camera_offsets``), the policy
+   keeps its calibration;
+3. a dead camera, each in turn: black from the first step and from mid-episode (``--env.blackout_cameras``,
+   ``--env.blackout_from_step``), and for OmniD removed from the inputs (``--policy.cameras``);
+4. the controls: blind (OmniD: every camera turned away in its calibration; others: black images) and
+   OmniD's scrambled geometry (calibrations permuted).
+
+Writes ``<out>/report.md`` (a table per checkpoint: Wilson intervals, share of the rate as trained, Fisher
+tests; a table across checkpoints), ``<out>/robustness_<label>.png`` (success against the perturbation
+beside the controls' bands) and ``<out>/results.json``. Resumable: a finished evaluation (its
+``eval_info.json``) is not run again.
+
+    omnid-robustness --checkpoint omnid=<pretrained_model> --checkpoint dp=<pretrained_model> --dry-run
+    MUJOCO_GL=egl omnid-robustness --checkpoint omnid=<pretrained_model> --out outputs/robustness
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import re
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from gym_omnid.constants import CAMERAS, MAX_EPISODE_STEPS, TASKS
+
+from lerobot_omnid.benchmark.benchmark import _csv, code_commit, describe_plan, execute
+from lerobot_omnid.benchmark.control_calibration import control_calibrations
+from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, TASK0, is_done
+from lerobot_omnid.benchmark.results import read_eval_info
+from lerobot_omnid.benchmark.robustness_plan import (
+    CONTROLS,
+    DRAW_SEED_STRIDE,
+    GROUPS,
+    LABELS,
+    LEVELS,
+    Cell,
+    Checkpoint,
+    RobustnessSettings,
+    build_runs,
+    calibration_file,
+    camera_offsets,
+    checkpoint_from_config,
+    eval_dir,
+    perturbed_calibrations,
+    plan_cells,
+)
+from lerobot_omnid.benchmark.robustness_report import (
+    checkpoint_lines,
+    comparison_lines,
+    pooled_rows,
+    robustness_chart,
+    rows_json,
+    table_rows,
+)
+from lerobot_omnid.calibration.rig_file import save_calibration_file
+from lerobot_omnid.cli import int_at_least
+
+SETTINGS_FILE = "robustness.json"
+"""What the finished evaluations of an output folder depend on; a rerun with other values is refused."""
+FIXED = {  # settings field: option
+    "task": "--task",
+    "episodes": "--eval-episodes",
+    "episode_length": "--episode-length",
+    "perturbation_seed": "--perturbation-seed",
+}
+LABEL_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="omnid-robustness", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--checkpoint",
+        action="append",
+        required=True,
+        metavar="[LABEL=]PATH",
+        help="a LeRobot pretrained_model folder, optionally labelled (default label: its policy type); "
+        "repeat for several",
+    )
+    parser.add_argument("--out", type=Path, default=Path("outputs/robustness"), help="output folder")
+    parser.add_argument("--task", choices=TASKS, default=TASK0, help=f"task (default {TASK0})")
+    parser.add_argument(
+        "--levels",
+        type=_csv(float, None),
+        default=LEVELS,
+        help="perturbation levels, cm and degrees together (default "
+        + ",".join(f"{v:g}" for v in LEVELS)
+        + ")",
+    )
+    parser.add_argument("--draws", type=int_at_least(1), default=3, help="random draws per level (default 3)")
+    parser.add_argument(
+        "--perturbation-seed",
+        type=int_at_least(0),
+        default=0,
+        help="seed of the draws' directions (default 0)",
+    )
+    parser.add_argument(
+        "--eval-seeds",
+        type=_csv(int, None),
+        default=(1,),
+        help="eval seeds k, each running env seeds k*1000, k*1000+1, ... (default 1)",
+    )
+    parser.add_argument(
+        "--eval-episodes", type=int_at_least(1), default=10, help="episodes per cell and seed"
+    )
+    parser.add_argument(
+        "--episode-length",
+        type=int_at_least(2),
+        default=MAX_EPISODE_STEPS,
+        help=f"time limit of an episode, env steps (default {MAX_EPISODE_STEPS}); mid-episode is half of it",
+    )
+    parser.add_argument(
+        "--conditions", type=_csv(str, GROUPS), default=GROUPS, help=f"subset of {','.join(GROUPS)}"
+    )
+    parser.add_argument(
+        "--dead-cameras", type=_csv(str, CAMERAS), help="cameras killed in turn (default: each checkpoint's)"
+    )
+    parser.add_argument("--device", default="cpu", help="torch device of lerobot-eval (default cpu)")
+    parser.add_argument("--dry-run", action="store_true", help="print every command, run nothing")
+    parser.add_argument("--report-only", action="store_true", help="only rebuild the report from results")
+    parser.add_argument("--verbose", action="store_true", help="show the output of every command")
+    return parser
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def load_checkpoints(parser: argparse.ArgumentParser, specs: Sequence[str]) -> list[tuple[Checkpoint, dict]]:
+    """Each ``[LABEL=]PATH`` as a :class:`Checkpoint` with its ``config.json`` content; errors name it."""
+    loaded: list[tuple[Checkpoint, dict]] = []
+    for spec in specs:
+        label, sep, path_text = spec.partition("=")
+        path = Path(path_text if sep else spec).absolute()
+        config = read_json(path / "config.json")
+        if not config:
+            parser.error(f"--checkpoint: expected a pretrained_model folder with a config.json, got {spec!r}")
+        label = label if sep else str(config.get("type"))
+        if not LABEL_PATTERN.fullmatch(label) or label in [c.label for c, _ in loaded]:
+            parser.error(
+                f"--checkpoint: expected a distinct label of letters, digits, '_', '.', '-' per checkpoint, "
+                f"got {label!r} in {spec!r} (label several checkpoints of one type: LABEL=PATH)"
+            )
+        try:
+            checkpoint = checkpoint_from_config(label, path, config, read_json(path / "train_config.json"))
+        except ValueError as e:
+            parser.error(str(e))
+        loaded.append((checkpoint, config))
+    return loaded
+
+
+def check_settings(
+    parser: argparse.ArgumentParser,
+    out: Path,
+    settings: RobustnessSettings,
+    checkpoints: Sequence[Checkpoint],
+) -> dict[str, Any]:
+    """Refuse settings that would mix with the folder's finished runs; returns the folder's settings."""
+    new = {field: getattr(settings, field) for field in FIXED}
+    new["checkpoints"] = {c.label: str(c.path) for c in checkpoints}
+    old = read_json(out / SETTINGS_FILE)
+    for field, option in FIXED.items():
+        if field in old and old[field] != new[field]:
+            parser.error(
+                f"{option}: expected {old[field]!r} as in the finished runs of {out} ({SETTINGS_FILE}), got "
+                f"{new[field]!r}; use another --out"
+            )
+    for label, path in new["checkpoints"].items():
+        if old.get("checkpoints", {}).get(label, path) != path:
+            parser.error(
+                f"--checkpoint {label}: expected {old['checkpoints'][label]} as in the finished runs of "
+                f"{out} ({SETTINGS_FILE}), got {path}; use another label or --out"
+            )
+    return {**new, "checkpoints": {**old.get("checkpoints", {}), **new["checkpoints"]}}
+
+
+def write_calibration_files(
+    checkpoint: Checkpoint, config: Mapping[str, Any], settings: RobustnessSettings, out: Path
+) -> int:
+    """Write the calibration file of every cell of ``checkpoint`` that has one; returns how many."""
+    written = 0
+    for cell in plan_cells(checkpoint, settings):
+        path = calibration_file(out, checkpoint, cell)
+        if path is None:
+            continue
+        if cell.condition in CONTROLS:
+            calibrations = control_calibrations(config, cell.condition)
+        else:
+            offsets = camera_offsets(cell.level, cell.draw, settings.perturbation_seed)
+            calibrations = perturbed_calibrations(checkpoint.calibrations, offsets)
+        save_calibration_file(path, calibrations)
+        written += 1
+    return written
+
+
+def cell_counts(
+    checkpoint: Checkpoint, settings: RobustnessSettings, out: Path
+) -> dict[Cell, tuple[int, int]]:
+    """(successes, episodes) per finished cell of ``checkpoint``, pooled over the eval seeds found."""
+    counts = {}
+    for cell in plan_cells(checkpoint, settings):
+        found = [
+            read_eval_info(path)
+            for k in settings.eval_seeds
+            if (path := eval_dir(out, checkpoint, cell, k) / "eval_info.json").is_file()
+        ]
+        if found:
+            counts[cell] = (sum(s for s, _ in found), sum(n for _, n in found))
+    return counts
+
+
+def describe(checkpoint: Checkpoint, settings: RobustnessSettings) -> str:
+    seeds = ", ".join(
+        f"{k * EVAL_SEED_STRIDE}-{k * EVAL_SEED_STRIDE + settings.episodes - 1}" for k in settings.eval_seeds
+    )
+    return (
+        f"`{checkpoint.path}` (policy `{checkpoint.policy_type}`, cameras {', '.join(checkpoint.cameras)}, "
+        f"{checkpoint.image_size} px, training seed {checkpoint.train_seed}); {settings.task} ID, env seeds "
+        f"{seeds}, episodes of at most {settings.episode_length} steps."
+    )
+
+
+def write_outputs(
+    checkpoints: Sequence[Checkpoint],
+    settings: RobustnessSettings,
+    out: Path,
+    commit: str | None,
+    command: str,
+) -> dict[str, list]:
+    """report.md, one chart per checkpoint, results.json; returns the rows per checkpoint label."""
+    rows = {c.label: table_rows(cell_counts(c, settings, out)) for c in checkpoints}
+    lines = [
+        "# Robustness: calibration error, bumped cameras, dead cameras",
+        "",
+        f"Command: `{command}`; code commit {commit}. Perturbation level L: every camera moved by L cm in a "
+        f"random direction and turned by L degrees about a random axis (seeded draws per level: "
+        f"{settings.draws}, perturbation seed {settings.perturbation_seed}; level 0 is the checkpoint as "
+        "trained). "
+        "Success % with Wilson 95 % intervals; against as trained: difference with Newcombe's interval, "
+        "two-sided Fisher exact test.",
+        "",
+        *comparison_lines(rows),
+        "",
+    ]
+    for checkpoint in checkpoints:
+        chart = None
+        if rows[checkpoint.label]:
+            chart = robustness_chart(
+                checkpoint.label, rows[checkpoint.label], out / f"robustness_{checkpoint.label}.png"
+            )
+        lines += checkpoint_lines(
+            checkpoint.label, describe(checkpoint, settings), rows[checkpoint.label], chart and chart.name
+        )
+    (out / "report.md").write_text("\n".join(lines))
+    results = {
+        "settings": dataclasses.asdict(settings),
+        "commit": commit,
+        "command": command,
+        "checkpoints": {
+            c.label: {"path": str(c.path), "rows": rows_json(rows[c.label])} for c in checkpoints
+        },
+    }
+    (out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.dry_run and args.report_only:
+        parser.error("--dry-run and --report-only: expected at most one of them, got both")
+    if min(args.levels) < 0:
+        parser.error(f"--levels: expected numbers >= 0 (cm and degrees), got {list(args.levels)}")
+    if args.draws >= DRAW_SEED_STRIDE:
+        parser.error(f"--draws: expected at most {DRAW_SEED_STRIDE - 1}, got {args.draws}")
+    if min(args.eval_seeds) < 1:
+        parser.error(f"--eval-seeds: expected positive integers, got {list(args.eval_seeds)}")
+    loaded = load_checkpoints(parser, args.checkpoint)
+    checkpoints = [c for c, _ in loaded]
+    settings = RobustnessSettings(
+        args.task,
+        tuple(sorted(args.levels)),
+        args.draws,
+        args.perturbation_seed,
+        args.eval_seeds,
+        args.eval_episodes,
+        args.episode_length,
+        args.conditions,
+        args.dead_cameras,
+        args.device,
+    )
+    out = args.out.resolve()
+    folder_settings = check_settings(parser, out, settings, checkpoints)
+    try:
+        runs = build_runs(checkpoints, settings, out)
+    except ValueError as e:
+        parser.error(str(e))
+    command = " ".join(["omnid-robustness", *(sys.argv[1:] if argv is None else argv)])
+    todo = sum(not is_done(r) for r in runs)
+    print(
+        f"omnid-robustness: {len(checkpoints)} checkpoint(s), {len(runs)} evaluations, {todo} to run; {out}"
+    )
+    for checkpoint in checkpoints:
+        cells = [c.condition for c in plan_cells(checkpoint, settings)]
+        conditions = "; ".join(f"{LABELS[c]} {cells.count(c)}" for c in dict.fromkeys(cells))
+        print(f"  {checkpoint.label}: {len(cells)} cells: {conditions}")
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return 0
+    out.mkdir(parents=True, exist_ok=True)
+    (out / SETTINGS_FILE).write_text(json.dumps(folder_settings, indent=2) + "\n")
+    commit = code_commit()
+    status: dict[str, str] = {}
+    seconds: dict[str, float] = {}
+    if not args.report_only:
+        files = sum(write_calibration_files(c, config, settings, out) for c, config in loaded)
+        print(f"calibration files: {files} under {out / 'calibration'}")
+        try:
+            status, seconds = execute(runs, out, args.verbose, commit)
+        except KeyboardInterrupt:
+            write_outputs(checkpoints, settings, out, commit, command)
+            print(
+                f"\nInterrupted: finished evaluations are kept, the one in progress reruns next time; {out}"
+            )
+            return 130
+    rows = write_outputs(checkpoints, settings, out, commit, command)
+    counts = {s: list(status.values()).count(s) for s in ("reused", "ran", "failed", "blocked")}
+    print(
+        f"\n{len(runs)} evaluations: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran")
+    )
+    print(f"time: {sum(seconds.values()) / 60:.1f} min; report: {out / 'report.md'}")
+    for label, label_rows in rows.items():
+        for row in pooled_rows(label_rows):
+            r, low, high = row.result, 100 * row.result.interval.low, 100 * row.result.interval.high
+            print(
+                f"  {label} {LABELS[row.condition]} {row.perturbation}: {r.successes}/{r.episodes} = "
+                f"{r.rate:.0f}% ({low:.0f}-{high:.0f})"
+            )
+    return 1 if counts["failed"] or counts["blocked"] else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

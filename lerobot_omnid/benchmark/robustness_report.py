@@ -1,0 +1,253 @@
+"""``omnid-robustness``'s tables and charts from success counts per cell (pure but for writing the PNG).
+
+A checkpoint's rows pool its cells: a perturbation level over its draws, a dead-camera variant per camera
+and over the cameras ("any one"). Every rate comes with its Wilson 95 % interval, its share of the rate as
+trained and a two-sided Fisher test against it; the blind and scrambled-geometry controls are rows of the
+table and horizontal bands of the chart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from lerobot_omnid.benchmark.charts import _error_bars, _pyplot
+from lerobot_omnid.benchmark.results import CellResult
+from lerobot_omnid.benchmark.robustness_plan import CONTROLS, DEAD, LABELS, Cell
+from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference
+
+ANY_CAMERA = "any one"
+"""The perturbation column of a dead-camera variant pooled over its cameras."""
+CURVES = ("calibration", "bumped")
+BAND_COLOURS = {"nominal": "tab:green", "blind": "tab:gray", "scrambled": "tab:orange"}
+SERIES_COLOURS = {
+    "calibration": "tab:blue",
+    "bumped": "tab:purple",
+    "dead_removed": "tab:blue",
+    "dead_black": "tab:red",
+    "dead_black_mid": "tab:purple",
+}
+SERIES_SHIFT = 0.06  # fraction of the spacing between x positions that series are shifted by, so bars show
+SIGNIFICANT = 0.05  # two-sided Fisher p below which a difference counts
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of a checkpoint's table: ``condition`` (a key of ``LABELS``) at ``level`` (curves) or for
+    ``camera`` (dead cameras; ``ANY_CAMERA`` pooled), the pooled ``result`` and its ``parts`` (per draw or
+    per camera: name, successes, episodes)."""
+
+    condition: str
+    result: CellResult
+    level: float | None = None
+    camera: str = ""
+    parts: tuple[tuple[str, int, int], ...] = ()
+
+    @property
+    def perturbation(self) -> str:
+        if self.level is not None:
+            return f"{self.level:g} cm, {self.level:g} deg" if self.level else "none"
+        return self.camera or "-"
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return self.condition, self.perturbation
+
+
+def _pool(parts: Sequence[tuple[str, int, int]]) -> CellResult:
+    return CellResult(sum(k for _, k, _ in parts), sum(n for _, _, n in parts), ())
+
+
+def table_rows(counts: Mapping[Cell, tuple[int, int]]) -> list[Row]:
+    """The rows of one checkpoint from its counts per cell (successes, episodes; pooled over eval seeds), in
+    the order as trained, calibration error and bumped cameras by level, dead cameras, controls; cells
+    without counts are left out."""
+    rows = []
+    if Cell("nominal") in counts:
+        rows.append(Row("nominal", CellResult(*counts[Cell("nominal")], ()), level=0.0))
+    for condition in CURVES:
+        levels = sorted({c.level for c in counts if c.condition == condition})
+        for level in levels:
+            cells = [c for c in counts if c.condition == condition and c.level == level]
+            cells.sort(key=lambda c: c.draw)
+            parts = tuple((f"draw {c.draw}", *counts[c]) for c in cells)
+            rows.append(Row(condition, _pool(parts), level=level, parts=parts))
+    for condition in DEAD:
+        cells = [c for c in counts if c.condition == condition]
+        parts = tuple((c.camera, *counts[c]) for c in sorted(cells, key=lambda c: c.camera))
+        rows += [Row(condition, CellResult(k, n, ()), camera=cam) for cam, k, n in parts]
+        if len(parts) > 1:
+            rows.append(Row(condition, _pool(parts), camera=ANY_CAMERA, parts=parts))
+    rows += [Row(c, CellResult(*counts[Cell(c)], ())) for c in CONTROLS if Cell(c) in counts]
+    return rows
+
+
+def _rate(result: CellResult) -> str:
+    return f"{result.rate:.0f} ({100 * result.interval.low:.0f}-{100 * result.interval.high:.0f})"
+
+
+def _versus(row: CellResult, other: CellResult) -> str:
+    """``row`` against ``other``: difference (pp) with Newcombe's interval, Fisher p."""
+    d = rate_difference(row.successes, row.episodes, other.successes, other.episodes)
+    p = fisher_exact(row.successes, row.episodes, other.successes, other.episodes)
+    return f"{100 * d.value:+.0f} pp ({100 * d.low:+.0f} to {100 * d.high:+.0f}), p = {p:.2g}"
+
+
+def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: str | None) -> list[str]:
+    """A checkpoint's section of the report: its use of the cameras (as trained against its controls), the
+    table, the chart."""
+    lines = [f"## {label}", "", description, ""]
+    found = {r.condition: r for r in rows if r.condition in ("nominal", *CONTROLS)}
+    nominal = found.get("nominal")
+    if nominal is None:
+        return [*lines, "No evaluation as trained yet.", ""]
+    for control in CONTROLS:
+        if control in found:
+            a, b = nominal.result, found[control].result
+            above = (
+                a.rate > b.rate
+                and fisher_exact(a.successes, a.episodes, b.successes, b.episodes) < SIGNIFICANT
+            )
+            verdict = "significantly above" if above else "not significantly above"
+            lines.append(f"- as trained against its {LABELS[control]}: {_versus(a, b)}: {verdict} it.")
+    if "blind" in found:
+        lines += [
+            "",
+            "A curve counts only for a checkpoint significantly above its blind control (issue 20).",
+        ]
+    lines += [
+        "",
+        "| Condition | Perturbation | Successes | Success % (Wilson 95 %) | Share of as trained | "
+        "Against as trained | Per draw / camera |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for row in rows:
+        r = row.result
+        share = f"{100 * r.rate / nominal.result.rate:.0f} %" if nominal.result.successes else "n/a"
+        against = "" if row.condition == "nominal" else _versus(r, nominal.result)
+        parts = ", ".join(f"{name} {k}/{n}" for name, k, n in row.parts)
+        lines.append(
+            f"| {LABELS[row.condition]} | {row.perturbation} | {r.successes}/{r.episodes} | {_rate(r)} | "
+            f"{share} | {against} | {parts} |"
+        )
+    if chart:
+        lines += ["", f"![{label}: success against perturbation]({chart})"]
+    return [*lines, ""]
+
+
+def pooled_rows(rows: Sequence[Row]) -> list[Row]:
+    """``rows`` without the per-camera rows of a dead-camera variant that has a pooled row."""
+    pooled = {r.condition for r in rows if r.camera == ANY_CAMERA}
+    return [r for r in rows if r.condition not in pooled or r.camera == ANY_CAMERA]
+
+
+def comparison_lines(rows_by_label: Mapping[str, Sequence[Row]]) -> list[str]:
+    """One table of the pooled rows with a column per checkpoint: success % (Wilson 95 %) and counts."""
+    labels = list(rows_by_label)
+    keys: list[tuple[str, str]] = []
+    for rows in rows_by_label.values():
+        keys += [r.key for r in pooled_rows(rows) if r.key not in keys]
+    cells = {label: {r.key: r.result for r in rows} for label, rows in rows_by_label.items()}
+    lines = [
+        "| Condition | Perturbation | " + " | ".join(labels) + " |",
+        "| --- | --- |" + " --- |" * len(labels),
+    ]
+    for condition, perturbation in keys:
+        values = []
+        for label in labels:
+            r = cells[label].get((condition, perturbation))
+            values.append(f"{_rate(r)}, {r.successes}/{r.episodes}" if r else "-")
+        lines.append(f"| {LABELS[condition]} | {perturbation} | " + " | ".join(values) + " |")
+    return lines
+
+
+def rows_json(rows: Sequence[Row]) -> list[dict[str, Any]]:
+    return [
+        {
+            "condition": r.condition,
+            "level": r.level,
+            "camera": r.camera,
+            "successes": r.result.successes,
+            "episodes": r.result.episodes,
+            "success_rate": r.result.rate,
+            "wilson_95": [100 * r.result.interval.low, 100 * r.result.interval.high],
+            "parts": [list(p) for p in r.parts],
+        }
+        for r in rows
+    ]
+
+
+def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
+    """Success (%) with Wilson intervals against the perturbation level (calibration error, bumped cameras;
+    level 0: as trained) and per dead camera, beside the controls (and, for the dead cameras, the rate as
+    trained) as horizontal bands: the rate and its interval."""
+    plt = _pyplot()
+    fig, (ax_curve, ax_dead) = plt.subplots(1, 2, figsize=(12, 4.2), width_ratios=(1.1, 1))
+    nominal = next((r for r in rows if r.condition == "nominal"), None)
+    controls = [r for r in rows if r.condition in CONTROLS]
+
+    def bands(ax: Any, with_nominal: bool) -> None:
+        for r in [*controls, *([nominal] if with_nominal and nominal else [])]:
+            colour = BAND_COLOURS[r.condition]
+            low, high = 100 * r.result.interval.low, 100 * r.result.interval.high
+            ax.axhspan(low, high, color=colour, alpha=0.15, lw=0)
+            ax.axhline(r.result.rate, color=colour, ls="--", lw=1, label=f"{LABELS[r.condition]}")
+
+    levels = sorted({r.level for r in rows if r.level is not None})
+    span = (max(levels) - min(levels)) if len(levels) > 1 else 1.0
+    curves = [c for c in CURVES if any(r.condition == c for r in rows)]
+    for i, condition in enumerate(curves):
+        points = [r for r in rows if r.condition == condition]
+        points = sorted([*([nominal] if nominal else []), *points], key=lambda r: r.level)
+        shift = (i - (len(curves) - 1) / 2) * SERIES_SHIFT * span
+        ax_curve.errorbar(
+            [r.level + shift for r in points],
+            [r.result.rate for r in points],
+            yerr=_error_bars([r.result for r in points]),
+            marker="o",
+            capsize=3,
+            color=SERIES_COLOURS[condition],
+            label=LABELS[condition],
+        )
+    bands(ax_curve, with_nominal=False)
+    ax_curve.set_xticks(levels)
+    ax_curve.set(
+        title=f"{label}: cameras off by L cm and L degrees",
+        xlabel="L (cm of translation and degrees of rotation, every camera)",
+        ylabel="success (%)",
+        ylim=(-2, 105),
+    )
+    ax_curve.legend(fontsize="small")
+
+    dead = [c for c in DEAD if any(r.condition == c for r in rows)]
+    cameras = list(dict.fromkeys(r.camera for r in rows if r.condition in DEAD))
+    for i, condition in enumerate(dead):
+        points = [r for r in rows if r.condition == condition]
+        shift = (i - (len(dead) - 1) / 2) * 3 * SERIES_SHIFT
+        ax_dead.errorbar(
+            [cameras.index(r.camera) + shift for r in points],
+            [r.result.rate for r in points],
+            yerr=_error_bars([r.result for r in points]),
+            marker="o",
+            ls="none",
+            capsize=3,
+            color=SERIES_COLOURS[condition],
+            label=LABELS[condition],
+        )
+    bands(ax_dead, with_nominal=True)
+    ax_dead.set_xticks(range(len(cameras)), cameras)
+    ax_dead.set(
+        title=f"{label}: one camera dead",
+        xlabel="dead camera",
+        ylabel="success (%)",
+        ylim=(-2, 105),
+        xlim=(-0.5, max(len(cameras), 1) - 0.5),
+    )
+    ax_dead.legend(fontsize="small")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

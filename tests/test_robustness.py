@@ -1,0 +1,389 @@
+"""omnid-robustness: the perturbation files (level 0 is the calibration, level L moves every camera by L cm
+and turns it by L degrees, seeded draws), the mirror image of the env's bumped cameras, the plan and its
+options (parsed by LeRobot's env config), the tables and the chart, argument errors, resumability with
+stand-in tools; one slow end-to-end run of the real tools at tiny size. (The env options themselves:
+tests/envs/test_gym_robustness_options.py.)"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import draccus
+import gymnasium as gym
+import numpy as np
+import pytest
+from gym_omnid import TRAIN_CAMERAS, WORKSPACE_BOUNDS
+from lerobot.envs.configs import EnvConfig
+from omnid_testing import TINY_POLICY_FLAGS
+
+import lerobot_omnid.benchmark.benchmark as bench
+from lerobot_omnid.benchmark import robustness
+from lerobot_omnid.benchmark.results import CellResult
+from lerobot_omnid.benchmark.robustness_plan import (
+    LEVELS,
+    Cell,
+    RobustnessSettings,
+    build_runs,
+    camera_offsets,
+    checkpoint_from_config,
+    perturbed_calibrations,
+    plan_cells,
+)
+from lerobot_omnid.benchmark.robustness_report import (
+    ANY_CAMERA,
+    checkpoint_lines,
+    comparison_lines,
+    robustness_chart,
+    table_rows,
+)
+from lerobot_omnid.calibration.rig_file import load_calibration_file
+from lerobot_omnid.calibration.schema import CameraCalibration
+from lerobot_omnid.env_config import OmniDEnvConfig
+from lerobot_omnid.keys import image_key
+
+SIZE = 64
+
+
+@pytest.fixture(scope="module")
+def calibrations() -> dict[str, dict]:
+    """The env's calibrations of cameras B-E at 64 px, keyed like a checkpoint's (built once)."""
+    return OmniDEnvConfig(image_size=SIZE).camera_calibrations()
+
+
+def checkpoint_config(policy_type: str, calibrations: dict) -> dict:
+    """The config.json content of a checkpoint of ``policy_type`` with cameras B-E at 64 px."""
+    features = {"observation.state": {"type": "STATE", "shape": [16]}}
+    features |= {image_key(c): {"type": "VISUAL", "shape": [3, SIZE, SIZE]} for c in TRAIN_CAMERAS}
+    config = {"type": policy_type, "input_features": features}
+    if policy_type == "omnid":
+        config |= {"camera_calibration": dict(calibrations), "volume_bounds": WORKSPACE_BOUNDS}
+    return config
+
+
+def checkpoint_dir(root: Path, policy_type: str, calibrations: dict) -> Path:
+    """A folder with the config.json and train_config.json of a checkpoint of ``policy_type``."""
+    root.mkdir(parents=True)
+    (root / "config.json").write_text(json.dumps(checkpoint_config(policy_type, calibrations)))
+    (root / "train_config.json").write_text(json.dumps({"seed": 1000}))
+    return root
+
+
+def flag(cmd, name: str) -> str | None:
+    return next((c.split("=", 1)[1] for c in cmd if c.startswith(f"--{name}=")), None)
+
+
+def centre_and_turn(before: CameraCalibration, after: CameraCalibration) -> tuple[float, float]:
+    """How far (m) the optical centre moved and by how much (degrees) the camera turned."""
+    a, b = np.array(before.T_cam_world), np.array(after.T_cam_world)
+    centre = lambda T: -T[:3, :3].T @ T[:3, 3]  # noqa: E731
+    turn = b[:3, :3] @ a[:3, :3].T
+    angle = math.degrees(math.acos(np.clip((np.trace(turn) - 1) / 2, -1, 1)))
+    return float(np.linalg.norm(centre(b) - centre(a))), angle
+
+
+def test_level_zero_file_is_the_calibration_and_level_l_moves_by_l(tmp_path, calibrations):
+    path = checkpoint_dir(tmp_path / "ckpt", "omnid", calibrations)
+    checkpoint = checkpoint_from_config("omnid", path, json.loads((path / "config.json").read_text()))
+    original = checkpoint.calibrations
+    zero = perturbed_calibrations(original, camera_offsets(0.0, 1, 0))
+    assert zero == dict(original)
+    # Through the files the command writes and the policy reads.
+    settings = RobustnessSettings("select_apple", levels=LEVELS, draws=2, groups=("calibration",))
+    config = json.loads((path / "config.json").read_text())
+    written = robustness.write_calibration_files(checkpoint, config, settings, tmp_path / "out")
+    assert written == (len(LEVELS) - 1) * 2
+    for level in LEVELS[1:]:
+        for draw in (1, 2):
+            file = tmp_path / "out" / "calibration" / "omnid" / "calibration" / f"{level:g}cm_{level:g}deg"
+            loaded = load_calibration_file(file / f"draw{draw}.json")
+            assert sorted(loaded) == [image_key(c) for c in TRAIN_CAMERAS]
+            for cam in TRAIN_CAMERAS:
+                moved = loaded[image_key(cam)]
+                distance, angle = centre_and_turn(original[cam], moved)
+                assert distance == pytest.approx(level / 100, abs=1e-8), (level, cam)
+                assert angle == pytest.approx(level, abs=1e-5), (level, cam)
+                assert moved.K == original[cam].K and moved.image_size == original[cam].image_size
+
+
+def test_draws_are_seeded_different_and_paired_across_levels():
+    first = camera_offsets(1.0, 1, 0)
+    assert first == camera_offsets(1.0, 1, 0)
+    assert first != camera_offsets(1.0, 2, 0) and first != camera_offsets(1.0, 1, 1)
+    assert sorted(first) == [f"cam_{c}" for c in "abcde"]
+    directions = {cam: np.array(v) for cam, v in first.items()}
+    for cam, v in camera_offsets(4.0, 1, 0).items():  # the same directions, 4x the size
+        np.testing.assert_allclose(np.array(v), 4 * directions[cam], atol=1e-8)
+    rotations = np.array([v[:3] for v in first.values()])
+    assert len({tuple(np.round(r, 6)) for r in rotations}) == 5  # a random axis per camera
+
+
+def test_bumped_env_is_the_mirror_of_the_perturbed_calibration(calibrations):
+    """The env's cameras moved by a draw's offsets have exactly the calibration the calibration-error file of
+    that draw gives the policy: the two conditions are mirror images."""
+    offsets = camera_offsets(2.0, 3, 0)
+    originals = {c: CameraCalibration.from_dict(calibrations[image_key(c)]) for c in TRAIN_CAMERAS}
+    believed = perturbed_calibrations(originals, offsets)
+    env = gym.make("gym_omnid/select_apple", image_size=SIZE, camera_offsets=offsets).unwrapped
+    try:
+        for cam in TRAIN_CAMERAS:
+            actual = env.camera_calibration(cam)["T_cam_world"]
+            np.testing.assert_allclose(actual, np.array(believed[cam].T_cam_world), atol=1e-9)
+    finally:
+        env.close()
+
+
+def test_plan_cells_and_options_per_policy(tmp_path, calibrations):
+    omnid_config = checkpoint_config("omnid", calibrations)
+    omnid = checkpoint_from_config("omnid", tmp_path / "o", omnid_config, {"seed": 1000})
+    dp = checkpoint_from_config("dp", tmp_path / "d", checkpoint_config("diffusion", calibrations))
+    settings = RobustnessSettings("select_apple", eval_seeds=(1, 2), episodes=3, episode_length=50)
+    conditions = lambda c: [cell.condition for cell in plan_cells(c, settings)]  # noqa: E731
+    assert conditions(omnid).count("calibration") == 4 * 3 and conditions(omnid).count("bumped") == 12
+    assert conditions(omnid).count("dead_removed") == 4 and "scrambled" in conditions(omnid)
+    assert set(conditions(dp)) == {"nominal", "bumped", "dead_black", "dead_black_mid", "blind"}
+    runs = build_runs([omnid, dp], settings, tmp_path / "out")
+    assert len(runs) == 2 * (39 + 22) and len({r.name for r in runs}) == len(runs)
+    assert {flag(r.cmd, "seed") for r in runs} == {"1000", "2000"}
+    by_name = {r.name: r for r in runs}
+    calib = by_name["omnid/calibration/0.5cm_0.5deg/draw2/seed1"].cmd
+    assert flag(calib, "policy.calibration_path").endswith(
+        "calibration/omnid/calibration/0.5cm_0.5deg/draw2.json"
+    )
+    bumped = by_name["dp/bumped/2cm_2deg/draw1/seed2"].cmd
+    offsets = json.loads(flag(bumped, "env.camera_offsets"))
+    assert offsets == {c: list(v) for c, v in camera_offsets(2.0, 1, 0).items() if c in TRAIN_CAMERAS}
+    removed = by_name["omnid/dead_removed/cam_c/seed1"].cmd
+    assert flag(removed, "env.cameras") == "[cam_b,cam_d,cam_e]"
+    assert json.loads(flag(removed, "policy.cameras")) == ["cam_b", "cam_d", "cam_e"]
+    mid = by_name["dp/dead_black_mid/cam_e/seed1"].cmd
+    assert flag(mid, "env.blackout_cameras") == "[cam_e]" and flag(mid, "env.blackout_from_step") == "25"
+    assert flag(by_name["dp/blind/seed1"].cmd, "env.blackout_cameras") == "[cam_b,cam_c,cam_d,cam_e]"
+    assert flag(by_name["omnid/blind/seed1"].cmd, "policy.calibration_path").endswith("omnid/blind.json")
+    assert (
+        by_name["omnid/nominal/seed1"].train_seed == 1000 and by_name["dp/nominal/seed1"].train_seed is None
+    )
+    # Every --env option is one LeRobot's env config parses and validates.
+    for run in runs:
+        env = draccus.parse(EnvOptions, args=[c for c in run.cmd if c.startswith("--env.")]).env
+        assert env.episode_length == 50 and env.cameras == flag(run.cmd, "env.cameras")[1:-1].split(",")
+
+
+@dataclasses.dataclass
+class EnvOptions:
+    """The ``--env.*`` options of a lerobot-eval command line."""
+
+    env: EnvConfig
+
+
+def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
+    counts = {
+        Cell("nominal"): (8, 10),
+        Cell("calibration", 1.0, 1): (6, 10),
+        Cell("calibration", 1.0, 2): (4, 10),
+        Cell("bumped", 1.0, 1): (7, 10),
+        Cell("dead_black", camera="cam_b"): (5, 10),
+        Cell("dead_black", camera="cam_c"): (3, 10),
+        Cell("blind"): (0, 10),
+        Cell("scrambled"): (2, 10),
+    }
+    rows = table_rows(counts)
+    keyed = {(r.condition, r.perturbation): r for r in rows}
+    assert keyed[("calibration", "1 cm, 1 deg")].result.successes == 10
+    assert keyed[("calibration", "1 cm, 1 deg")].parts == (("draw 1", 6, 10), ("draw 2", 4, 10))
+    assert keyed[("dead_black", ANY_CAMERA)].result == CellResult(8, 20, ())
+    conditions = [r.condition for r in rows]
+    assert conditions[0] == "nominal" and conditions[-2:] == ["blind", "scrambled"]
+    lines = "\n".join(checkpoint_lines("omnid", "a checkpoint", rows, "robustness_omnid.png"))
+    assert "against its blind control: +80 pp" in lines and "significantly above it" in lines
+    assert "| calibration error (scene unchanged) | 1 cm, 1 deg | 10/20 | 50 (30-70) | 62 % |" in lines
+    assert "draw 1 6/10, draw 2 4/10" in lines and "![omnid" in lines
+    table = comparison_lines({"omnid": rows, "dp": table_rows({Cell("nominal"): (5, 10)})})
+    assert table[0] == "| Condition | Perturbation | omnid | dp |"
+    assert any(
+        line.startswith("| dead camera, black from the first step | any one | 40 (22-61), 8/20 | - |")
+        for line in table
+    )
+    assert not any("| cam_b |" in line for line in table)  # pooled rows only
+    png = robustness_chart("omnid", rows, tmp_path / "chart.png")
+    assert png.stat().st_size > 10_000
+
+
+def test_no_control_no_verdict_and_no_nominal():
+    rows = table_rows({Cell("nominal"): (0, 4)})
+    lines = checkpoint_lines("dp", "x", rows, None)
+    assert "| as trained | none | 0/4 | 0 (0-49) | n/a |" in "\n".join(lines)
+    assert "No evaluation as trained yet." in checkpoint_lines("dp", "x", [], None)
+
+
+def _fake_eval(calls: list[str], rates: dict[str, float]):
+    """A stand-in for run_logged: writes the eval_info.json lerobot-eval would (success % per cell name)."""
+
+    def run(cmd, log_path, on_line=None):
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+        out = Path(flag(cmd, "output_dir"))  # <out>/eval/<label>/<cell name>/seed<k>
+        cell = "/".join(out.relative_to(out.parents[-1]).parts[-4:-1])
+        calls.append(cell)
+        out.mkdir(parents=True, exist_ok=True)
+        rate = next((v for k, v in rates.items() if k in cell), 50.0)
+        n = int(flag(cmd, "eval.n_episodes"))
+        (out / "eval_info.json").write_text(json.dumps({"overall": {"pc_success": rate, "n_episodes": n}}))
+        return 0
+
+    return run
+
+
+def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, capsys):
+    omnid = checkpoint_dir(tmp_path / "omnid", "omnid", calibrations)
+    dp = checkpoint_dir(tmp_path / "dp", "diffusion", calibrations)
+    calls: list[str] = []
+    monkeypatch.setattr(bench, "run_logged", _fake_eval(calls, {"nominal": 80.0, "blind": 0.0}))
+    out = tmp_path / "out"
+    common = ["--checkpoint", f"omnid={omnid}", "--checkpoint", str(dp), "--out", str(out), "--draws", "2"]
+    common += ["--eval-episodes", "5", "--dead-cameras", "cam_b,cam_c"]
+    argv = [*common, "--levels", "0,1,2"]
+    assert robustness.main(argv) == 0
+    n_omnid = 1 + 2 * 2 + 2 * 2 + 3 * 2 + 2
+    n_dp = 1 + 2 * 2 + 2 * 2 + 1
+    assert len(calls) == n_omnid + n_dp
+    text = capsys.readouterr().out
+    assert f"{n_omnid + n_dp} evaluations: {n_omnid + n_dp} ran" in text
+    assert "omnid as trained none: 4/5 = 80%" in text and "diffusion blind control -: 0/5 = 0%" in text
+    report = (out / "report.md").read_text()
+    assert "## omnid" in report and "## diffusion" in report and "| omnid | diffusion |" in report
+    assert (out / "robustness_omnid.png").is_file() and (out / "robustness_diffusion.png").is_file()
+    results = json.loads((out / "results.json").read_text())
+    nominal = results["checkpoints"]["omnid"]["rows"][0]
+    assert nominal["condition"] == "nominal" and nominal["successes"] == 4
+    summary = json.loads((out / "eval" / "omnid" / "nominal" / "seed1" / "run_summary.json").read_text())
+    assert summary["successes"] == 4 and summary["train_seed"] == 1000
+    assert len(list((out / "calibration" / "omnid").rglob("*.json"))) == 2 * 2 + 2
+    # Resumed: nothing runs again; a new level adds only its runs.
+    calls.clear()
+    assert robustness.main(argv) == 0 and calls == []
+    assert robustness.main([*common, "--levels", "0,1,2,4"]) == 0
+    assert len(calls) == 2 * 2 + 2 * 1  # OmniD: calibration and bumped, 2 draws; DP: bumped
+    # Settings that would mix with the finished runs are refused, by option.
+    with pytest.raises(SystemExit):
+        robustness.main([*argv, "--eval-episodes", "3"])
+    assert "--eval-episodes: expected 5 as in the finished runs" in capsys.readouterr().err
+
+
+def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations, capsys):
+    omnid = checkpoint_dir(tmp_path / "omnid", "omnid", calibrations)
+    out = tmp_path / "out"
+    assert robustness.main(["--checkpoint", str(omnid), "--out", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "39 evaluations, 39 to run" in text and text.count("lerobot-eval --policy.path=") == 39
+    assert "calibration error (scene unchanged) 12" in text
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--checkpoint", "nowhere"], "--checkpoint: expected a pretrained_model folder with a config.json"),
+        (["--levels", "0,-1"], "--levels: expected numbers >= 0"),
+        (["--draws", "0"], "--draws: expected an integer >= 1"),
+        (["--eval-seeds", "0"], "--eval-seeds: expected positive integers"),
+        (["--dead-cameras", "cam_a"], "--dead-cameras: expected inputs of checkpoint omnid"),
+        (["--conditions", "calibration,nope"], "--conditions: expected comma-separated distinct values"),
+        (["--dry-run", "--report-only"], "expected at most one of them"),
+        (["DUP"], "expected a distinct label"),
+    ],
+)
+def test_bad_arguments_are_named(argv, expected, tmp_path, calibrations, capsys):
+    omnid = checkpoint_dir(tmp_path / "omnid", "omnid", calibrations)
+    if argv == ["DUP"]:
+        argv = ["--checkpoint", f"a={omnid}", "--checkpoint", f"a={omnid}"]
+    elif "--checkpoint" not in argv:
+        argv = ["--checkpoint", str(omnid), *argv]
+    with pytest.raises(SystemExit):
+        robustness.main([*argv, "--out", str(tmp_path / "out")])
+    assert expected in capsys.readouterr().err
+
+
+def test_checkpoint_config_errors_name_the_field(tmp_path, calibrations):
+    config = checkpoint_config("omnid", calibrations)
+    with pytest.raises(ValueError, match="camera_calibration: expected every image input"):
+        checkpoint_from_config("o", tmp_path, {**config, "camera_calibration": {}})
+    with pytest.raises(ValueError, match="input_features: expected images of fixed cameras"):
+        checkpoint_from_config("o", tmp_path, {**config, "input_features": {}})
+    with pytest.raises(ValueError, match="frame_calibration: expected a static calibration"):
+        checkpoint_from_config("o", tmp_path, {**config, "frame_calibration": ["observation.images.cam_b"]})
+    wide = {**config["input_features"], "observation.images.cam_b": {"type": "VISUAL", "shape": [3, 64, 96]}}
+    with pytest.raises(ValueError, match="expected square images of one size"):
+        checkpoint_from_config("o", tmp_path, {**config, "input_features": wide})
+
+
+@pytest.mark.slow
+def test_real_tools_end_to_end_tiny(tmp_path):
+    """A tiny OmniD trained by the real lerobot-train, evaluated by the real lerobot-eval under a calibration
+    error, a bumped camera and a dead camera (removed, black, black from mid-episode); then resumed."""
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    bin_dir = Path(sys.executable).parent
+    data, train = tmp_path / "data", tmp_path / "train"
+    record = [
+        str(bin_dir / "omnid-record"),
+        "--task",
+        "select_apple",
+        "--episodes",
+        "1",
+        "--image-size",
+        "32",
+    ]
+    record += ["--cameras", ",".join(TRAIN_CAMERAS), "--root", str(data), "--repo-id", "local/data"]
+    subprocess.run(record, check=True, capture_output=True, timeout=300, env=env)
+    cmd = [str(bin_dir / "lerobot-train"), "--dataset.repo_id=local/data", f"--dataset.root={data}"]
+    cmd += [
+        "--dataset.video_backend=pyav",
+        *TINY_POLICY_FLAGS,
+        "--steps=2",
+        "--batch_size=2",
+        "--num_workers=0",
+    ]
+    cmd += ["--save_freq=2", f"--output_dir={train}", "--wandb.enable=false"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    checkpoint = train / "checkpoints" / "last" / "pretrained_model"
+    out = tmp_path / "robustness"
+    argv = [str(bin_dir / "omnid-robustness"), "--checkpoint", f"tiny={checkpoint}", "--out", str(out)]
+    argv += ["--conditions", "calibration,bumped,dead", "--levels", "0,1", "--draws", "1"]
+    argv += ["--dead-cameras", "cam_b", "--eval-episodes", "1", "--episode-length", "6"]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=900, env=env)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "6 evaluations: 6 ran" in proc.stdout
+    rows = json.loads((out / "results.json").read_text())["checkpoints"]["tiny"]["rows"]
+    assert [r["condition"] for r in rows] == [
+        "nominal",
+        "calibration",
+        "bumped",
+        "dead_removed",
+        "dead_black",
+        "dead_black_mid",
+    ]
+    assert all(r["episodes"] == 1 for r in rows)
+    assert (out / "robustness_tiny.png").is_file() and "## tiny" in (out / "report.md").read_text()
+    # What lerobot-eval rendered: a calibration error leaves the scene as it was, a bumped camera moves it.
+    nominal, calibration, bumped = (
+        _first_frame(out / "eval" / "tiny" / cell / "seed1")
+        for cell in ("nominal", "calibration/1cm_1deg/draw1", "bumped/1cm_1deg/draw1")
+    )
+    np.testing.assert_array_equal(calibration, nominal)
+    assert np.abs(bumped.astype(int) - nominal).mean() > 1.0
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0 and "6 evaluations: 6 reused, 0 ran" in proc.stdout
+
+
+def _first_frame(eval_dir: Path) -> np.ndarray:
+    """The first frame of the episode video lerobot-eval wrote into ``eval_dir``."""
+    import av
+
+    (video,) = eval_dir.rglob("*.mp4")
+    with av.open(str(video)) as container:
+        return next(container.decode(video=0)).to_ndarray(format="rgb24")
