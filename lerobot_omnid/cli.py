@@ -36,3 +36,25 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
 
 positive_int = int_at_least(1)
 """An argparse ``type`` accepting integers >= 1."""
+
+
+def csv_of(
+    kind: Callable[[str], Any], allowed: Collection | None, none: bool = False
+) -> Callable[[str], tuple]:
+    """argparse type: distinct comma-separated values of ``kind`` from ``allowed`` (any if None); ``none``
+    also accepts the word none for the empty tuple."""
+
+    def parse(text: str) -> tuple:
+        if none and text.strip() == "none":
+            return ()
+        try:
+            items = tuple(kind(x.strip()) for x in text.split(",") if x.strip())
+        except ValueError:
+            items = ()
+        bad = [x for x in items if allowed is not None and x not in allowed]
+        if not items or bad or len(set(items)) != len(items):
+            expected = f"distinct values from {list(allowed)}" if allowed else "distinct values"
+            raise argparse.ArgumentTypeError(f"expected comma-separated {expected}, got {text!r}")
+        return items
+
+    return parse

@@ -47,7 +47,7 @@ from lerobot_omnid.benchmark.plan import (
     build_plan,
     is_done,
 )
-from lerobot_omnid.cli import int_at_least
+from lerobot_omnid.cli import csv_of, int_at_least
 
 OVERRIDES = {  # option: (profile field, minimum)
     "episodes": ("episodes", 1),
@@ -141,26 +141,6 @@ def execute(
     return status, seconds
 
 
-def _csv(kind, allowed, none: bool = False):
-    """argparse type: distinct comma-separated values of ``kind`` from ``allowed`` (any if None); ``none``
-    also accepts the word none for the empty tuple."""
-
-    def parse(text: str) -> tuple:
-        if none and text.strip() == "none":
-            return ()
-        try:
-            items = tuple(kind(x.strip()) for x in text.split(",") if x.strip())
-        except ValueError:
-            items = ()
-        bad = [x for x in items if allowed is not None and x not in allowed]
-        if not items or bad or len(set(items)) != len(items):
-            expected = f"distinct values from {list(allowed)}" if allowed else "distinct values"
-            raise argparse.ArgumentTypeError(f"expected comma-separated {expected}, got {text!r}")
-        return items
-
-    return parse
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="omnid-benchmark", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -170,21 +150,25 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--device", help="torch device (default: the profile's, cpu for mini, cuda for paper)"
     )
-    parser.add_argument("--methods", type=_csv(str, METHODS), help=f"subset of {','.join(METHODS)}")
-    parser.add_argument("--tasks", type=_csv(str, available_tasks()), help="subset of the benchmark's tasks")
+    parser.add_argument("--methods", type=csv_of(str, METHODS), help=f"subset of {','.join(METHODS)}")
     parser.add_argument(
-        "--settings", type=_csv(str, SETTINGS), help=f"task-0 settings, of {','.join(SETTINGS)}"
+        "--tasks", type=csv_of(str, available_tasks()), help="subset of the benchmark's tasks"
     )
-    parser.add_argument("--eval-seeds", type=_csv(int, None), help="comma-separated eval seeds, e.g. 1,2,3,4")
+    parser.add_argument(
+        "--settings", type=csv_of(str, SETTINGS), help=f"task-0 settings, of {','.join(SETTINGS)}"
+    )
+    parser.add_argument(
+        "--eval-seeds", type=csv_of(int, None), help="comma-separated eval seeds, e.g. 1,2,3,4"
+    )
     parser.add_argument(
         "--train-seeds",
-        type=_csv(int, None),
+        type=csv_of(int, None),
         help="comma-separated lerobot-train seeds, e.g. 1000,1001 (default: 1000; other seeds' runs go "
         "to <out>/train_seed<seed>/)",
     )
     parser.add_argument(
         "--control-settings",
-        type=_csv(str, SETTINGS, none=True),
+        type=csv_of(str, SETTINGS, none=True),
         help="task-0 settings in which the controls are evaluated, or none (mini: id; paper: "
         "id,position_ood)",
     )

@@ -11,7 +11,7 @@ from lerobot_omnid.benchmark.report import ABLATION_COLUMNS, task_title
 from lerobot_omnid.benchmark.results import CellResult, Key
 
 
-def _pyplot() -> ModuleType:
+def pyplot() -> ModuleType:
     """matplotlib's pyplot with the non-interactive Agg backend."""
     import matplotlib
 
@@ -21,7 +21,7 @@ def _pyplot() -> ModuleType:
     return plt
 
 
-def _error_bars(cells: Sequence[CellResult]) -> list[list[float]]:
+def error_bars(cells: Sequence[CellResult]) -> list[list[float]]:
     """(2, N) distances (%) from each rate down and up to the ends of its Wilson interval."""
     return [
         [c.rate - 100 * c.interval.low for c in cells],
@@ -40,7 +40,7 @@ def bar_chart(
     path: Path,
 ) -> Path:
     """Grouped bars of success (%) with Wilson intervals: ID per task; task-0 generalisation; ablation."""
-    plt = _pyplot()
+    plt = pyplot()
     panels = [
         ("ID success, cameras B-E", [(task_title(t), t, "id") for t in tasks], methods),
         (
@@ -62,7 +62,7 @@ def bar_chart(
             xs = [g + (i - (len(rows) - 1) / 2) * width for g, _ in found]
             cells = [c for _, c in found]
             ax.bar(
-                xs, [c.rate for c in cells], width, yerr=_error_bars(cells), capsize=2, label=labels.get(m, m)
+                xs, [c.rate for c in cells], width, yerr=error_bars(cells), capsize=2, label=labels.get(m, m)
             )
         ax.set_xticks(range(len(groups)), [name for name, _, _ in groups])
         ax.set(title=title, ylabel="success (%)", ylim=(0, 105))
@@ -70,7 +70,7 @@ def bar_chart(
     if ablation:
         ax = axes[-1]
         cells = [results[(m, task0, "id")] for _, m in ablation]
-        ax.bar(range(len(ablation)), [c.rate for c in cells], 0.5, yerr=_error_bars(cells), capsize=2)
+        ax.bar(range(len(ablation)), [c.rate for c in cells], 0.5, yerr=error_bars(cells), capsize=2)
         ax.set_xticks(range(len(ablation)), [title for title, _ in ablation])
         ax.set(title=f"OmniD ablation, {task_title(task0)} ID", ylabel="success (%)", ylim=(0, 105))
     fig.tight_layout()
@@ -90,7 +90,7 @@ def position_curve_chart(
 ) -> Path:
     """Success (%) against the distance outside the training square (each band at its middle, cm), one
     line per method with its Wilson intervals; the band edges are drawn as grid lines."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 3.8))
     offsets = {
         m: (i - (len(methods) - 1) / 2) * 0.12 for i, m in enumerate(methods)
@@ -108,7 +108,7 @@ def position_curve_chart(
         ax.errorbar(
             xs,
             [c.rate for c in cells],
-            yerr=_error_bars(cells),
+            yerr=error_bars(cells),
             marker="o",
             capsize=3,
             label=labels.get(m, m),

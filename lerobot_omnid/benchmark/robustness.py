@@ -35,7 +35,7 @@ from typing import Any
 
 from gym_omnid.constants import CAMERAS, MAX_EPISODE_STEPS, TASKS
 
-from lerobot_omnid.benchmark.benchmark import _csv, code_commit, describe_plan, execute
+from lerobot_omnid.benchmark.benchmark import code_commit, describe_plan, execute
 from lerobot_omnid.benchmark.control_calibration import control_calibrations
 from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, TASK0, is_done
 from lerobot_omnid.benchmark.results import read_eval_info
@@ -65,7 +65,7 @@ from lerobot_omnid.benchmark.robustness_report import (
     table_rows,
 )
 from lerobot_omnid.calibration.rig_file import save_calibration_file
-from lerobot_omnid.cli import int_at_least
+from lerobot_omnid.cli import csv_of, int_at_least
 
 SETTINGS_FILE = "robustness.json"
 """What the finished evaluations of an output folder depend on; a rerun with other values is refused."""
@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--task", choices=TASKS, default=TASK0, help=f"task (default {TASK0})")
     parser.add_argument(
         "--levels",
-        type=_csv(float, None),
+        type=csv_of(float, None),
         default=LEVELS,
         help="perturbation levels, cm and degrees together (default "
         + ",".join(f"{v:g}" for v in LEVELS)
@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--eval-seeds",
-        type=_csv(int, None),
+        type=csv_of(int, None),
         default=(1,),
         help="eval seeds k, each running env seeds k*1000, k*1000+1, ... (default 1)",
     )
@@ -123,10 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"time limit of an episode, env steps (default {MAX_EPISODE_STEPS}); mid-episode is half of it",
     )
     parser.add_argument(
-        "--conditions", type=_csv(str, GROUPS), default=GROUPS, help=f"subset of {','.join(GROUPS)}"
+        "--conditions", type=csv_of(str, GROUPS), default=GROUPS, help=f"subset of {','.join(GROUPS)}"
     )
     parser.add_argument(
-        "--dead-cameras", type=_csv(str, CAMERAS), help="cameras killed in turn (default: each checkpoint's)"
+        "--dead-cameras",
+        type=csv_of(str, CAMERAS),
+        help="cameras killed in turn (default: each checkpoint's)",
     )
     parser.add_argument("--device", default="cpu", help="torch device of lerobot-eval (default cpu)")
     parser.add_argument("--dry-run", action="store_true", help="print every command, run nothing")

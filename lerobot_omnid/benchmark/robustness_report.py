@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lerobot_omnid.benchmark.charts import _error_bars, _pyplot
+from lerobot_omnid.benchmark.charts import error_bars, pyplot
 from lerobot_omnid.benchmark.results import CellResult
 from lerobot_omnid.benchmark.robustness_plan import CONTROLS, DEAD, LABELS, Cell
 from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference
@@ -183,7 +183,7 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
     """Success (%) with Wilson intervals against the perturbation level (calibration error, bumped cameras;
     level 0: as trained) and per dead camera, beside the controls (and, for the dead cameras, the rate as
     trained) as horizontal bands: the rate and its interval."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax_curve, ax_dead) = plt.subplots(1, 2, figsize=(12, 4.2), width_ratios=(1.1, 1))
     nominal = next((r for r in rows if r.condition == "nominal"), None)
     controls = [r for r in rows if r.condition in CONTROLS]
@@ -205,7 +205,7 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
         ax_curve.errorbar(
             [r.level + shift for r in points],
             [r.result.rate for r in points],
-            yerr=_error_bars([r.result for r in points]),
+            yerr=error_bars([r.result for r in points]),
             marker="o",
             capsize=3,
             color=SERIES_COLOURS[condition],
@@ -229,7 +229,7 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
         ax_dead.errorbar(
             [cameras.index(r.camera) + shift for r in points],
             [r.result.rate for r in points],
-            yerr=_error_bars([r.result for r in points]),
+            yerr=error_bars([r.result for r in points]),
             marker="o",
             ls="none",
             capsize=3,
