@@ -56,6 +56,7 @@ OVERRIDES = {  # option: (profile field, minimum)
     "finetune_steps": ("finetune_steps", 1),
     "batch_size": ("batch_size", 1),
     "eval_episodes": ("eval_episodes", 1),
+    "eval_batch_size": ("eval_batch_size", 1),
     "heldout_episodes": ("heldout_episodes", 0),
     "episode_length": ("episode_length", 1),
     "image_size": ("image_size", 16),

@@ -110,8 +110,12 @@ def eval_command(
     background: str = "id",
     seed: int | None = None,
     extra: Sequence[str] = (),
+    batch_size: int = 1,
 ) -> list[str]:
-    """`lerobot-eval` of a checkpoint in one setting of the omnid envs; ``seed`` is the first env seed."""
+    """`lerobot-eval` of a checkpoint in one setting of the omnid envs; ``seed`` is the first env seed.
+
+    ``batch_size`` > 1 runs that many envs at once (LeRobot's vector env, one process each by default) and
+    the policy on their batch; episode ``i`` still has env seed ``seed + i``."""
     return [
         str(BIN / "lerobot-eval"),
         f"--policy.path={checkpoint}",
@@ -123,7 +127,7 @@ def eval_command(
         env_cameras(cameras),
         f"--env.image_size={image_size}",
         f"--eval.n_episodes={episodes}",
-        "--eval.batch_size=1",
+        f"--eval.batch_size={batch_size}",
         *([f"--seed={seed}"] if seed is not None else []),
         f"--output_dir={output_dir}",
         *extra,

@@ -64,7 +64,8 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         f"- Same for every method: datasets of {p.episodes} expert episodes per task (cameras B-E, "
         f"{p.image_size}x{p.image_size} px, env seeds from 0), {p.steps} training steps, "
         f"batch {p.batch_size}; evaluation: {p.eval_episodes} episodes per setting and eval seed, eval seeds "
-        f"{evals}, at most {p.episode_length} env steps (10 per second).",
+        f"{evals}, at most {p.episode_length} env steps (10 per second), {p.eval_batch_size} envs at once "
+        "(`--eval.batch_size`; episode i keeps env seed start + i).",
         "- Training seeds (the `--seed` of every `lerobot-train`, each a full repetition of the training "
         f"runs and their evaluations on the same datasets and env seeds): {folders}.",
         f"- Controls on {TASK0}, the same checkpoint evaluated in the settings "

@@ -86,6 +86,7 @@ class BenchmarkProfile:
     finetune_steps: int
     batch_size: int
     eval_episodes: int  # per setting and eval seed
+    eval_batch_size: int  # envs run at once by each lerobot-eval (--eval.batch_size)
     heldout_episodes: int  # held-out expert episodes per task-0 setting for the open-loop action error
     eval_seeds: tuple[int, ...]
     episode_length: int  # time limit of an evaluation episode, env steps (10 per second)
@@ -105,13 +106,15 @@ class BenchmarkProfile:
 PROFILES = {
     "mini": BenchmarkProfile(
         name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
-        image_size=64, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, heldout_episodes=3,
+        image_size=64, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, eval_batch_size=5,
+        heldout_episodes=3,
         eval_seeds=(1,), episode_length=200, settings=SETTINGS, control_settings=("id",),
         train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cpu", num_workers=2, small=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
-        steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, heldout_episodes=20,
+        steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, eval_batch_size=10,
+        heldout_episodes=20,
         eval_seeds=(1, 2, 3, 4), episode_length=200, settings=SETTINGS,
         control_settings=("id", "position_ood"), train_seeds=(TRAIN_SEED,), fewshot=True, ablations=True,
         device="cuda", num_workers=8, small=False,
@@ -474,6 +477,7 @@ def plan_models(
                     background,
                     seed=k * EVAL_SEED_STRIDE,
                     extra=(f"--env.episode_length={p.episode_length}", *control_options),
+                    batch_size=min(p.eval_batch_size, p.eval_episodes),
                 )
                 name = f"{prefix}{folder}/{model}/{task}/{setting}/seed{k}"
                 result = (model, task, setting)
