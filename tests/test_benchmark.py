@@ -842,3 +842,25 @@ def test_report_only_aggregates_folders_from_two_machines(monkeypatch, tmp_path,
         with pytest.raises(SystemExit):
             bench.main(["--report-only", "--out", str(a), *small, *bad, "--also", also])
         assert expected in capsys.readouterr().err
+
+
+def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_path):
+    """The GPU profile end to end with the tools stood in (its real run needs a GPU): both methods trained
+    once, ID / one unseen table / one position band evaluated with 30 episodes and 10 envs at once, the
+    controls in ID, no held-out recordings; then its report."""
+    calls: list[str] = []
+    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    runs = by_name(build_plan(PROFILES["gpu8"], tmp_path, (TASK0,)))
+    evals = sorted(n for n in runs if n.startswith("eval/"))
+    assert evals == [
+        f"eval/{m}/select_apple/{s}/seed1"
+        for m in ("diffusion", "omnid")
+        for s in ("id", "ood2", "position_band_2")
+    ]
+    cmd = runs["eval/omnid/select_apple/ood2/seed1"].cmd
+    assert flag(cmd, "eval.n_episodes") == "30" and flag(cmd, "eval.batch_size") == "10"
+    assert flag(runs["train/omnid/select_apple"].cmd, "policy.device") == "cuda"
+    assert bench.main(["--profile", "gpu8", "--device", "cpu", "--out", str(tmp_path / "b")]) == 0
+    assert calls.count("lerobot-train") == 2 and calls.count("omnid-record") == 1
+    assert "position_band_2" in (tmp_path / "b" / "report.md").read_text()

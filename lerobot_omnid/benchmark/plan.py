@@ -111,6 +111,15 @@ PROFILES = {
         eval_seeds=(1,), episode_length=200, settings=SETTINGS, control_settings=("id",),
         train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cpu", num_workers=2, small=True,
     ),
+    # One large GPU in about 8 minutes (not yet measured on one): mini's model sizes with 3x the steps and
+    # 4x the batch, ID, one unseen table and one position band, 30 episodes per cell with the controls.
+    "gpu8": BenchmarkProfile(
+        name="gpu8", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
+        image_size=64, steps=3000, finetune_steps=200, batch_size=32, eval_episodes=30, eval_batch_size=10,
+        heldout_episodes=0, eval_seeds=(1,), episode_length=200, settings=("id", "ood2", "position_band_2"),
+        control_settings=("id",), train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cuda",
+        num_workers=8, small=True,
+    ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
         steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, eval_batch_size=10,
