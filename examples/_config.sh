@@ -13,6 +13,9 @@
 : "${EVAL_EPISODES:=50}"              # episodes per evaluation setting
 : "${EPISODE_LENGTH:=200}"            # time limit of an evaluation episode, env steps (10 per second)
 : "${NUM_WORKERS:=2}"                 # dataloader workers
+: "${VOLUME_SHAPE:=[32,40,16]}"       # OmniD's feature volume: cells along x, y, z of the workspace box
+: "${POLICY_SIZE_FLAGS:=}"            # more --policy.* options for a new policy, space-separated, e.g. a
+                                      # quick run's sizes: "--policy.d_model=32 --policy.down_dims=[32,64]"
 
 # The python of the environment the lerobot commands come from (the activated .venv; else the repo's
 # .venv), to read the benchmark's shared names from gym_omnid; override with PYTHON=...
@@ -35,9 +38,11 @@ CHECKPOINT="$OUT/train_bcde/checkpoints/last/pretrained_model"
 # every option.
 POLICY_FLAGS=(
   --policy.type=omnid --policy.device="$DEVICE" --policy.push_to_hub=false
-  --policy.volume_bounds="$WORKSPACE_BOUNDS" --policy.volume_shape="[32,40,16]"
+  --policy.volume_bounds="$WORKSPACE_BOUNDS" --policy.volume_shape="$VOLUME_SHAPE"
   --policy.backbone_layer=3 --policy.noise_scheduler_type=DDIM --policy.num_inference_steps=10
 )
+read -r -a _size_flags <<< "$POLICY_SIZE_FLAGS"  # split on spaces, no glob expansion of [..]
+POLICY_FLAGS+=("${_size_flags[@]}")
 COMMON_TRAIN_FLAGS=(
   --dataset.video_backend=pyav --batch_size="$BATCH_SIZE" --num_workers="$NUM_WORKERS" --wandb.enable=false
 )

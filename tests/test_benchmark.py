@@ -16,6 +16,7 @@ from pathlib import Path
 import draccus
 import gym_omnid.constants
 import pytest
+from omnid_jobs import Job, job
 
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import checkpoint_cameras
@@ -620,11 +621,9 @@ def test_resumability_checks(tmp_path):
     assert is_done(train) and not is_done(record)
 
 
-@pytest.mark.slow
-def test_real_tools_end_to_end_tiny(tmp_path):
-    """The real omnid-record, lerobot-train (OmniD and stock DP) and lerobot-eval, controls included, at the
-    smallest sizes."""
-    out = tmp_path / "bench"
+@job("benchmark", seconds=120)
+def _real_tools_tiny(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
+    out = job.tmp / "bench"
     argv = [
         str(Path(sys.executable).parent / "omnid-benchmark"),
         "--out",
@@ -649,7 +648,15 @@ def test_real_tools_end_to_end_tiny(tmp_path):
         "1",
     ]
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=900, env=env)
+    return out, job.run(argv, timeout=900, env=env)
+
+
+@pytest.mark.slow
+@pytest.mark.jobs("benchmark")
+def test_real_tools_end_to_end_tiny(jobs):
+    """The real omnid-record, lerobot-train (OmniD and stock DP) and lerobot-eval, controls included, at the
+    smallest sizes."""
+    out, proc = jobs.result("benchmark")
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     summary = json.loads((out / "results.json").read_text())
     cells = {(c["model"], c["setting"]): c for c in summary["cells"]}

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from omnid_jobs import Job, job
 
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
@@ -17,25 +18,62 @@ FAKE_HUB = Path(__file__).parent / "fake_hub"
 
 pytestmark = pytest.mark.slow
 
+TINY_POLICY = (
+    "--policy.d_model=32", "--policy.num_heads=2", "--policy.num_layers=1", "--policy.ffn_dim=64",
+    "--policy.down_dims=[32,64]",
+)  # fmt: skip
 
-@pytest.fixture(scope="module")
-def workflow_env(tmp_path_factory):
-    out = tmp_path_factory.mktemp("workflow")
+
+def workflow_env(out: Path) -> dict:
+    """The example scripts' environment: everything below ``out``, tiny sizes."""
     env = dict(os.environ)
     env.update(
         OUT=str(out), EPISODES="2", FEWSHOT_EPISODES="2", IMAGE_SIZE="64", STEPS="2", FINETUNE_STEPS="2",
-        BATCH_SIZE="2", EVAL_EPISODES="1", EPISODE_LENGTH="10", NUM_WORKERS="0",
+        BATCH_SIZE="2", EVAL_EPISODES="1", EPISODE_LENGTH="10", NUM_WORKERS="0", TRAIN_EVAL_EPISODES="1",
+        # A small OmniD (the defaults' UNet alone has 250M parameters: ~25 s a chunk on 2 cores), same parts.
+        VOLUME_SHAPE="[8,10,4]", POLICY_SIZE_FLAGS=" ".join(TINY_POLICY),
         PATH=f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}",
     )  # fmt: skip
-    return out, env
+    return env
 
 
-def run_example(name: str, env: dict) -> str:
-    result = subprocess.run(
-        ["bash", str(EXAMPLES / name)], env=env, capture_output=True, text=True, timeout=900
-    )
+def run_example(job: Job, name: str, env: dict) -> subprocess.CompletedProcess:
+    return job.run(["bash", str(EXAMPLES / name)], env=env, timeout=900)
+
+
+def example_log(results: dict[str, subprocess.CompletedProcess], name: str) -> str:
+    result = results[name]
     assert result.returncode == 0, f"{name} failed:\n{result.stdout[-2000:]}\n{result.stderr[-4000:]}"
     return result.stdout + result.stderr
+
+
+# The scripts run as background jobs (tests/omnid_jobs.py): steps 1-3 in order (stopping at the first that
+# fails), then the steps that start from their datasets and checkpoint, each a job of its own.
+@job("examples", seconds=300)  # with the jobs that wait for it
+def _record_train_evaluate(job: Job) -> tuple[Path, dict, dict[str, subprocess.CompletedProcess]]:
+    out = job.tmp
+    env = workflow_env(out)
+    results = {}
+    for name in ("01_record_datasets.sh", "02_train_omnid.sh", "03_evaluate.sh"):
+        results[name] = run_example(job, name, env)
+        if results[name].returncode != 0:
+            break
+    return out, env, results
+
+
+def _after_step_3(name: str, seconds: float):
+    """A job running example ``name`` on the outputs of steps 1-3."""
+
+    def run(job: Job) -> dict[str, subprocess.CompletedProcess]:
+        _, env, _ = job.result("examples")
+        return {name: run_example(job, name, env)}
+
+    return job(name, seconds)(run)
+
+
+_after_step_3("04_finetune_camera_a.sh", 60)
+_after_step_3("05_eval_camera_subset.sh", 15)
+_after_step_3("07_accelerate_two_processes.sh", 30)
 
 
 def success_info(eval_dir: Path) -> dict:
@@ -44,31 +82,38 @@ def success_info(eval_dir: Path) -> dict:
     return info
 
 
-def test_record_train_evaluate(workflow_env):
-    out, env = workflow_env
-    run_example("01_record_datasets.sh", env)
+@pytest.mark.jobs("examples")
+def test_record_train_evaluate(jobs):
+    out, _, ran = jobs.result("examples")
+    example_log(ran, "01_record_datasets.sh")
     for name in ("select_apple_bcde", "select_apple_a", "select_chemistry_tube_a"):
         assert (out / "data" / name / "meta" / "info.json").is_file()
-    log = run_example("02_train_omnid.sh", env)
+    log = example_log(ran, "02_train_omnid.sh")
     assert "Eval policy" in log or "eval" in log.lower()
     checkpoint = out / "train_bcde" / "checkpoints" / "last" / "pretrained_model"
     assert OmniDPolicy.from_pretrained(checkpoint).camera_keys == [
         f"observation.images.cam_{c}" for c in "bcde"
     ]
-    run_example("03_evaluate.sh", env)
+    example_log(ran, "03_evaluate.sh")
     for setting in ("id_id", "position_ood_id", "id_ood1"):
         success_info(out / f"eval_bcde_{setting}")
 
 
-def test_python_example_runs_the_checkpoint_for_one_episode(workflow_env):
-    out, env = workflow_env
+@job("08_run_checkpoint.py", seconds=15)
+def _run_checkpoint(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
+    out, env, _ = job.result("examples")
     checkpoint = out / "train_bcde" / "checkpoints" / "last" / "pretrained_model"
-    assert checkpoint.is_dir(), "trained by test_record_train_evaluate (run this module in order)"
-    result = subprocess.run(
+    return checkpoint, job.run(
         [sys.executable, str(EXAMPLES / "08_run_checkpoint.py"), f"--checkpoint={checkpoint}",
          "--task=select_apple", "--seed=1", "--device=cpu", "--max-steps=3"],
-        env=env, capture_output=True, text=True, timeout=300,
+        env=env, timeout=300,
     )  # fmt: skip
+
+
+@pytest.mark.jobs("08_run_checkpoint.py")
+def test_python_example_runs_the_checkpoint_for_one_episode(jobs):
+    checkpoint, result = jobs.result("08_run_checkpoint.py")
+    assert checkpoint.is_dir(), "trained by 02_train_omnid.sh (test_record_train_evaluate)"
     assert result.returncode == 0, f"{result.stdout[-2000:]}\n{result.stderr[-4000:]}"
     lines = result.stdout.splitlines()
     # The env observes the checkpoint's cameras at its training image size (IMAGE_SIZE=64).
@@ -76,9 +121,10 @@ def test_python_example_runs_the_checkpoint_for_one_episode(workflow_env):
     assert re.fullmatch(r"select_apple, seed 1: (success after [1-3]|failure after 3) steps", lines[-1])
 
 
-def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(workflow_env):
-    out, env = workflow_env
-    run_example("04_finetune_camera_a.sh", env)
+@pytest.mark.jobs("examples", "04_finetune_camera_a.sh")
+def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(jobs):
+    out, _, _ = jobs.result("examples")
+    example_log(jobs.result("04_finetune_camera_a.sh"), "04_finetune_camera_a.sh")
     base = OmniDPolicy.from_pretrained(out / "train_bcde" / "checkpoints" / "last" / "pretrained_model")
     for task in ("select_apple", "select_chemistry_tube"):
         tuned = OmniDPolicy.from_pretrained(
@@ -106,18 +152,38 @@ def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(workflow_e
         success_info(out / f"eval_finetune_a_{task}")
 
 
-def test_evaluate_on_a_camera_subset(workflow_env):
-    out, env = workflow_env
-    run_example("05_eval_camera_subset.sh", env)
+@pytest.mark.jobs("examples", "05_eval_camera_subset.sh")
+def test_evaluate_on_a_camera_subset(jobs):
+    out, _, _ = jobs.result("examples")
+    example_log(jobs.result("05_eval_camera_subset.sh"), "05_eval_camera_subset.sh")
     success_info(out / "eval_bcde_on_bc")
 
 
-def test_push_to_hub_folder_card_and_reload_in_fresh_process(workflow_env, tmp_path):
-    _, env = workflow_env
-    hub = tmp_path / "hub"
+@job("06_push_to_hub.sh", seconds=40)
+def _push_and_evaluate(job: Job) -> tuple[Path, dict[str, subprocess.CompletedProcess]]:
+    """06_push_to_hub.sh into a fake Hub, then lerobot-eval of the pushed folder in a fresh process."""
+    _, env, _ = job.result("examples")
+    hub = job.tmp / "hub"
     env = dict(env, HUB_REPO_ID="someone/omnid_select_apple", OMNID_FAKE_HUB_DIR=str(hub),
                PYTHONPATH=f"{FAKE_HUB}{os.pathsep}{env.get('PYTHONPATH', '')}")  # fmt: skip
-    run_example("06_push_to_hub.sh", env)
+    ran = {"06_push_to_hub.sh": run_example(job, "06_push_to_hub.sh", env)}
+    if ran["06_push_to_hub.sh"].returncode == 0:
+        pushed = hub / "someone" / "omnid_select_apple"
+        ran["lerobot-eval"] = job.run(
+            [str(Path(sys.executable).parent / "lerobot-eval"), f"--policy.path={pushed}",
+             "--policy.device=cpu", "--env.type=omnid", "--env.task=select_apple",
+             "--env.cameras=[cam_b,cam_c,cam_d,cam_e]", "--env.image_size=64", "--env.episode_length=10",
+             "--eval.n_episodes=1", "--eval.batch_size=1", f"--output_dir={job.tmp / 'eval_pushed'}"],
+            timeout=600,
+        )  # fmt: skip
+    return job.tmp, ran
+
+
+@pytest.mark.jobs("06_push_to_hub.sh")
+def test_push_to_hub_folder_card_and_reload_in_fresh_process(jobs):
+    tmp_path, ran = jobs.result("06_push_to_hub.sh")
+    hub = tmp_path / "hub"
+    example_log(ran, "06_push_to_hub.sh")
     pushed = hub / "someone" / "omnid_select_apple"
     for name in (
         "model.safetensors",
@@ -131,20 +197,15 @@ def test_push_to_hub_folder_card_and_reload_in_fresh_process(workflow_env, tmp_p
     assert "## OmniD: cameras and calibration" in card and "`observation.images.cam_e`" in card
     assert "local/select_apple_bcde" in card
     # A fresh process loads the pushed folder and evaluates it.
-    result = subprocess.run(
-        [str(Path(sys.executable).parent / "lerobot-eval"), f"--policy.path={pushed}", "--policy.device=cpu",
-         "--env.type=omnid", "--env.task=select_apple", "--env.cameras=[cam_b,cam_c,cam_d,cam_e]",
-         "--env.image_size=64", "--env.episode_length=10", "--eval.n_episodes=1", "--eval.batch_size=1",
-         f"--output_dir={tmp_path / 'eval_pushed'}"],
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+    result = ran["lerobot-eval"]
     assert result.returncode == 0, result.stderr[-3000:]
     success_info(tmp_path / "eval_pushed")
 
 
-def test_accelerate_two_processes(workflow_env):
-    out, env = workflow_env
-    log = run_example("07_accelerate_two_processes.sh", env)
+@pytest.mark.jobs("examples", "07_accelerate_two_processes.sh")
+def test_accelerate_two_processes(jobs):
+    out, _, _ = jobs.result("examples")
+    log = example_log(jobs.result("07_accelerate_two_processes.sh"), "07_accelerate_two_processes.sh")
     assert "Effective batch size: 2 x 2 = 4" in log
     assert (
         out / "train_bcde_2proc" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors"

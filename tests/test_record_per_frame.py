@@ -5,7 +5,6 @@ with LeRobot's own ``lerobot-edit-dataset``, which refuses the same datasets rec
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import pytest
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.scripts.lerobot_edit_dataset import edit_dataset
+from omnid_jobs import Job, job
 from omnid_testing import TINY_POLICY_FLAGS
 
 from lerobot_omnid.calibration.frame_columns import (
@@ -160,17 +160,17 @@ def test_datasets_of_two_rigs_merge_with_the_columns_and_not_without(tmp_path, m
         _merge(static, tmp_path / "merged_static", monkeypatch)
 
 
-@pytest.mark.slow
-def test_console_commands_record_two_rigs_and_merge(tmp_path):
-    """The same with the console commands a user types: ``omnid-record --rig ... --per-frame-calibration``
-    twice, then ``lerobot-edit-dataset --operation.type merge``."""
+@job("record_two_rigs_merge_train", seconds=40)
+def _record_two_rigs_merge_train(job: Job) -> dict:
+    """The console commands of the test below; lerobot-train once the merge succeeded."""
+    tmp_path = job.tmp
     bin_dir = Path(sys.executable).parent
     roots = [tmp_path / rig for rig in ("closer", "higher")]
     for root in roots:
         record = [str(bin_dir / "omnid-record"), "--episodes", "1", "--cameras", "cam_c,cam_wrist"]
         record += ["--image-size", str(SIZE), "--rig", root.name, "--per-frame-calibration"]
         record += ["--root", str(root), "--repo-id", f"local/{root.name}"]
-        subprocess.run(record, check=True, capture_output=True, timeout=600)
+        job.run(record, check=True, timeout=600, text=False)
     merge = [
         str(bin_dir / "lerobot-edit-dataset"),
         "--new_repo_id=local/merged",
@@ -178,7 +178,28 @@ def test_console_commands_record_two_rigs_and_merge(tmp_path):
     ]
     merge += ["--operation.type=merge", f"--operation.repo_ids={[f'local/{r.name}' for r in roots]}"]
     merge += [f"--operation.roots={[str(r) for r in roots]}"]
-    proc = subprocess.run(merge, capture_output=True, text=True, timeout=600)
+    ran = {"merge": job.run(merge, timeout=600)}
+    if ran["merge"].returncode == 0:
+        train = [
+            str(bin_dir / "lerobot-train"),
+            "--dataset.repo_id=local/merged",
+            f"--dataset.root={tmp_path / 'm'}",
+        ]
+        train += ["--dataset.video_backend=pyav", *TINY_POLICY_FLAGS, "--steps=2", "--batch_size=2"]
+        train += ["--num_workers=0", "--save_freq=2", f"--output_dir={tmp_path / 'train'}"]
+        train += ["--wandb.enable=false"]
+        ran["train"] = job.run(train, timeout=600)
+    return {"tmp_path": tmp_path, **ran}
+
+
+@pytest.mark.slow
+@pytest.mark.jobs("record_two_rigs_merge_train")
+def test_console_commands_record_two_rigs_and_merge(jobs):
+    """The same with the console commands a user types: ``omnid-record --rig ... --per-frame-calibration``
+    twice, then ``lerobot-edit-dataset --operation.type merge``."""
+    ran = jobs.result("record_two_rigs_merge_train")
+    tmp_path = ran["tmp_path"]
+    proc = ran["merge"]
     assert proc.returncode == 0, proc.stderr[-3000:]
     merged = LeRobotDataset("local/merged", root=tmp_path / "m", video_backend="pyav")
     assert merged.num_episodes == 2
@@ -187,14 +208,7 @@ def test_console_commands_record_two_rigs_and_merge(tmp_path):
 
     # One OmniD model learns from both rigs: lerobot-train reads every frame's calibration from the columns.
     out = tmp_path / "train"
-    train = [
-        str(bin_dir / "lerobot-train"),
-        "--dataset.repo_id=local/merged",
-        f"--dataset.root={tmp_path / 'm'}",
-    ]
-    train += ["--dataset.video_backend=pyav", *TINY_POLICY_FLAGS, "--steps=2", "--batch_size=2"]
-    train += ["--num_workers=0", "--save_freq=2", f"--output_dir={out}", "--wandb.enable=false"]
-    proc = subprocess.run(train, capture_output=True, text=True, timeout=600)
+    proc = ran["train"]
     assert proc.returncode == 0, proc.stderr[-3000:]
     checkpoint = out / "checkpoints" / "last" / "pretrained_model"
     config = json.loads((checkpoint / "config.json").read_text())

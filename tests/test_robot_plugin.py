@@ -24,6 +24,7 @@ from lerobot.robots.utils import make_robot_from_config
 from lerobot.teleoperators.config import TeleoperatorConfig
 from lerobot.teleoperators.utils import make_teleoperator_from_config
 from lerobot.utils.errors import DeviceAlreadyConnectedError, DeviceNotConnectedError
+from omnid_jobs import Job, job
 
 from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.robot.config_omnid_expert import OmniDExpertConfig
@@ -339,8 +340,9 @@ if os.path.basename(sys.argv[0]) == "lerobot-rollout" and os.environ.get("OMNID_
 '''
 
 
-@pytest.mark.slow
-def test_real_robot_path_record_attach_train_rollout(tmp_path):
+@job("09_real_robot_path.sh", seconds=60)
+def _real_robot_path(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
+    tmp_path = job.tmp
     out = tmp_path / "out"
     site = tmp_path / "site"
     site.mkdir()
@@ -354,10 +356,16 @@ def test_real_robot_path_record_attach_train_rollout(tmp_path):
         HF_LEROBOT_HOME=str(tmp_path / "hf_lerobot"),
         PATH=f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}",
     )  # fmt: skip
-    result = subprocess.run(
-        ["bash", str(ROOT / "examples" / "09_real_robot_path.sh")],
-        env=env, capture_output=True, text=True, timeout=1200,
-    )  # fmt: skip
+    return tmp_path, job.run(
+        ["bash", str(ROOT / "examples" / "09_real_robot_path.sh")], env=env, timeout=1200
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.jobs("09_real_robot_path.sh")
+def test_real_robot_path_record_attach_train_rollout(jobs):
+    tmp_path, result = jobs.result("09_real_robot_path.sh")
+    out, trace = tmp_path / "out", tmp_path / "trace.jsonl"
     log = result.stdout + result.stderr
     assert result.returncode == 0, f"{result.stdout[-3000:]}\n{result.stderr[-5000:]}"
 

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from gym_omnid import TRAIN_CAMERAS, WORKSPACE_BOUNDS
 from lerobot.envs.configs import EnvConfig
+from omnid_jobs import Job, job
 from omnid_testing import TINY_POLICY_FLAGS
 
 import lerobot_omnid.benchmark.benchmark as bench
@@ -321,10 +322,10 @@ def test_checkpoint_config_errors_name_the_field(tmp_path, calibrations):
         checkpoint_from_config("o", tmp_path, {**config, "input_features": wide})
 
 
-@pytest.mark.slow
-def test_real_tools_end_to_end_tiny(tmp_path):
-    """A tiny OmniD trained by the real lerobot-train, evaluated by the real lerobot-eval under a calibration
-    error, a bumped camera and a dead camera (removed, black, black from mid-episode); then resumed."""
+@job("robustness", seconds=60)
+def _record_train_robustness(job: Job) -> dict:
+    """omnid-record, lerobot-train, omnid-robustness (the first run; the test reruns it)."""
+    tmp_path = job.tmp
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     bin_dir = Path(sys.executable).parent
     data, train = tmp_path / "data", tmp_path / "train"
@@ -338,7 +339,7 @@ def test_real_tools_end_to_end_tiny(tmp_path):
         "32",
     ]
     record += ["--cameras", ",".join(TRAIN_CAMERAS), "--root", str(data), "--repo-id", "local/data"]
-    subprocess.run(record, check=True, capture_output=True, timeout=300, env=env)
+    job.run(record, check=True, timeout=300, env=env)
     cmd = [str(bin_dir / "lerobot-train"), "--dataset.repo_id=local/data", f"--dataset.root={data}"]
     cmd += [
         "--dataset.video_backend=pyav",
@@ -348,14 +349,27 @@ def test_real_tools_end_to_end_tiny(tmp_path):
         "--num_workers=0",
     ]
     cmd += ["--save_freq=2", f"--output_dir={train}", "--wandb.enable=false"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    ran = {"train": job.run(cmd, timeout=600, env=env)}
     checkpoint = train / "checkpoints" / "last" / "pretrained_model"
     out = tmp_path / "robustness"
     argv = [str(bin_dir / "omnid-robustness"), "--checkpoint", f"tiny={checkpoint}", "--out", str(out)]
     argv += ["--conditions", "calibration,bumped,dead", "--levels", "0,1", "--draws", "1"]
     argv += ["--dead-cameras", "cam_b", "--eval-episodes", "1", "--episode-length", "6"]
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=900, env=env)
+    if ran["train"].returncode == 0:
+        ran["robustness"] = job.run(argv, timeout=900, env=env)
+    return {"out": out, "argv": argv, "env": env, **ran}
+
+
+@pytest.mark.slow
+@pytest.mark.jobs("robustness")
+def test_real_tools_end_to_end_tiny(jobs):
+    """A tiny OmniD trained by the real lerobot-train, evaluated by the real lerobot-eval under a calibration
+    error, a bumped camera and a dead camera (removed, black, black from mid-episode); then resumed."""
+    ran = jobs.result("robustness")
+    out, argv, env = ran["out"], ran["argv"], ran["env"]
+    proc = ran["train"]
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    proc = ran["robustness"]
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "6 evaluations: 6 ran" in proc.stdout
     rows = json.loads((out / "results.json").read_text())["checkpoints"]["tiny"]["rows"]

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from omnid_jobs import Job, job
 
 from lerobot_omnid.benchmark.demo import main
 
@@ -12,12 +13,16 @@ OMNID_DEMO = Path(sys.executable).parent / "omnid-demo"
 TINY = ["--episodes", "2", "--steps", "2", "--eval-episodes", "1", "--episode-length", "10"]
 
 
+@job("demo", seconds=60)
+def _first_demo_run(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
+    out = job.tmp / "demo"
+    return out, job.run([str(OMNID_DEMO), "--out", str(out), *TINY], timeout=900)
+
+
 @pytest.mark.slow
-def test_main_job_writes_report_and_reuses_finished_stages(tmp_path):
-    out = tmp_path / "demo"
-    result = subprocess.run(
-        [str(OMNID_DEMO), "--out", str(out), *TINY], capture_output=True, text=True, timeout=900
-    )
+@pytest.mark.jobs("demo")
+def test_main_job_writes_report_and_reuses_finished_stages(jobs):
+    out, result = jobs.result("demo")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     report = (out / "report.md").read_text()
     for row in ("| id | 1 |", "| position_ood | 1 |", "| record |", "| train |", "| eval_id |"):
