@@ -50,7 +50,12 @@ from typing import Any
 import numpy as np
 
 from lerobot_omnid.calibration.frame_columns import extrinsics_key, intrinsics_key
-from lerobot_omnid.calibration.rig_file import parse_camera_entry, read_mapping_file, write_mapping_file
+from lerobot_omnid.calibration.rig_file import (
+    load_camera_entries,
+    parse_camera_entry,
+    read_mapping_file,
+    write_mapping_file,
+)
 from lerobot_omnid.calibration.schema import ASPECT_TOLERANCE, CalibrationError, CameraCalibration
 from lerobot_omnid.keys import image_key
 
@@ -202,14 +207,7 @@ def load_hand_eye_file(path: str | Path) -> dict[str, HandEyeCalibration]:
 
     Returns the calibrations keyed by image feature key (``observation.images.<cam>``).
     """
-    path = Path(path)
-    calibrations: dict[str, HandEyeCalibration] = {}
-    for cam, entry in read_mapping_file(path).items():
-        key = image_key(str(cam))
-        if key in calibrations:
-            raise CalibrationError(f"hand-eye file {path}: camera {key} is given twice ('{cam}')")
-        calibrations[key] = parse_hand_eye_entry(entry, camera=f"{path.name}: {cam}")
-    return calibrations
+    return load_camera_entries(path, parse_hand_eye_entry, kind="hand-eye file")
 
 
 def save_hand_eye_file(

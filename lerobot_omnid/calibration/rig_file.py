@@ -46,7 +46,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -157,19 +157,27 @@ def parse_camera_entry(entry: Any, camera: str) -> CameraCalibration:
     return calib
 
 
+def load_camera_entries[Entry](
+    path: str | Path, parse_entry: Callable[[Any, str], Entry], kind: str = "calibration file"
+) -> dict[str, Entry]:
+    """Read a file keyed by camera and parse every entry with ``parse_entry(entry, camera)``; errors name
+    the ``kind`` of file, the file, the camera and the field. Keys: image feature keys."""
+    path = Path(path)
+    entries: dict[str, Entry] = {}
+    for cam, entry in read_mapping_file(path).items():
+        key = image_key(str(cam))
+        if key in entries:
+            raise CalibrationError(f"{kind} {path}: camera {key} is given twice ('{cam}')")
+        entries[key] = parse_entry(entry, f"{path.name}: {cam}")
+    return entries
+
+
 def load_calibration_file(path: str | Path) -> dict[str, CameraCalibration]:
     """Read and validate a calibration file; errors name the file, the camera and the field.
 
     Returns the calibrations keyed by image feature key (``observation.images.<cam>``).
     """
-    path = Path(path)
-    calibrations: dict[str, CameraCalibration] = {}
-    for cam, entry in read_mapping_file(path).items():
-        key = image_key(str(cam))
-        if key in calibrations:
-            raise CalibrationError(f"calibration file {path}: camera {key} is given twice ('{cam}')")
-        calibrations[key] = parse_camera_entry(entry, camera=f"{path.name}: {cam}")
-    return calibrations
+    return load_camera_entries(path, parse_camera_entry)
 
 
 def load_calibration_meta(path: str | Path) -> dict[str, dict[str, Any]]:
