@@ -51,6 +51,7 @@ import numpy as np
 
 from lerobot_omnid.calibration.frame_columns import extrinsics_key, intrinsics_key
 from lerobot_omnid.calibration.rig_file import (
+    homogeneous_matrix,
     load_camera_entries,
     parse_camera_entry,
     read_mapping_file,
@@ -229,14 +230,7 @@ def save_hand_eye_file(
 
 def _gripper_pose(value: Any, where: str) -> np.ndarray:
     """A validated rigid 4x4 (metres) from a poses file; the rotation is projected onto the nearest one."""
-    try:
-        T = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise CalibrationError(f"{where}: expected a 4x4 matrix of numbers ({e})") from e
-    if T.shape != (4, 4) or not np.isfinite(T).all():
-        raise CalibrationError(f"{where}: expected a finite 4x4 matrix, got {value!r}")
-    if not np.allclose(T[3], (0.0, 0.0, 0.0, 1.0)):
-        raise CalibrationError(f"{where}: expected last row [0, 0, 0, 1], got {T[3].tolist()}")
+    T = homogeneous_matrix(value, where)
     R = T[:3, :3]
     deviation = float(np.abs(R.T @ R - np.eye(3)).max())
     if deviation > POSE_ROTATION_TOL or np.linalg.det(R) < 0:

@@ -102,16 +102,22 @@ def read_mapping_file(path: Path) -> dict[str, Any]:
     return data
 
 
+def homogeneous_matrix(value: Any, where: str) -> np.ndarray:
+    """A finite 4x4 float64 matrix with last row [0, 0, 0, 1]; errors name ``where``."""
+    try:
+        T = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise CalibrationError(f"{where}: expected a 4x4 matrix of numbers ({e})") from e
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise CalibrationError(f"{where}: expected a finite 4x4 matrix, got {value!r}")
+    if not np.allclose(T[3], (0.0, 0.0, 0.0, 1.0)):
+        raise CalibrationError(f"{where}: expected last row [0, 0, 0, 1], got {T[3].tolist()}")
+    return T
+
+
 def _invert_pose(T_world_cam: Any, where: str) -> list[list[float]]:
     """``T_world_cam`` (validated as a rigid 4x4 by the caller's schema) -> ``T_cam_world``."""
-    try:
-        T = np.asarray(T_world_cam, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise CalibrationError(f"{where}.T_world_cam: expected a 4x4 matrix of numbers ({e})") from e
-    if T.shape != (4, 4) or not np.isfinite(T).all():
-        raise CalibrationError(f"{where}.T_world_cam: expected a finite 4x4 matrix, got {T_world_cam!r}")
-    if not np.allclose(T[3], (0.0, 0.0, 0.0, 1.0)):
-        raise CalibrationError(f"{where}.T_world_cam: expected last row [0, 0, 0, 1], got {T[3].tolist()}")
+    T = homogeneous_matrix(T_world_cam, f"{where}.T_world_cam")
     cam_T_world = np.eye(4)
     cam_T_world[:3, :3] = T[:3, :3].T
     cam_T_world[:3, 3] = -T[:3, :3].T @ T[:3, 3]
