@@ -130,3 +130,21 @@ def make_tiny_dataset(
         dataset.save_episode()
     dataset.finalize()
     return dataset
+
+
+def record_rig(root, rig: str, per_frame_calibration: bool, cameras, size: int = 32):
+    """One select_apple expert episode recorded by ``omnid-record``'s own function with ``rig``'s cameras."""
+    from lerobot_omnid.record import record_dataset
+
+    summary = record_dataset(
+        root,
+        episodes=1,
+        cameras=list(cameras),
+        image_size=size,
+        rig=rig,
+        per_frame_calibration=per_frame_calibration,
+        repo_id=f"local/{root.name}",
+        show_progress=False,
+    )
+    assert summary.complete
+    return root

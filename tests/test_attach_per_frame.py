@@ -14,6 +14,7 @@ import pytest
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.scripts.lerobot_edit_dataset import edit_dataset
+from omnid_testing import record_rig
 
 from lerobot_omnid.calibration.attach_calibration import main
 from lerobot_omnid.calibration.frame_columns import (
@@ -30,25 +31,13 @@ from lerobot_omnid.calibration.schema import (
     calibration_from_feature_info,
 )
 from lerobot_omnid.env_config import OmniDEnvConfig
-from lerobot_omnid.record import record_dataset
 
 SIZE = 32
 CAMERAS = ["cam_b", "cam_d"]
 
 
 def _record(root: Path, rig: str, per_frame_calibration: bool) -> Path:
-    summary = record_dataset(
-        root,
-        episodes=1,
-        cameras=CAMERAS,
-        image_size=SIZE,
-        rig=rig,
-        per_frame_calibration=per_frame_calibration,
-        repo_id=f"local/{root.name}",
-        show_progress=False,
-    )
-    assert summary.complete
-    return root
+    return record_rig(root, rig, per_frame_calibration, CAMERAS, SIZE)
 
 
 def _tree_digest(root: Path) -> dict[str, str]:

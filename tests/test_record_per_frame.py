@@ -17,7 +17,7 @@ from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.scripts.lerobot_edit_dataset import edit_dataset
 from omnid_jobs import Job, job
-from omnid_testing import TINY_POLICY_FLAGS
+from omnid_testing import TINY_POLICY_FLAGS, record_rig
 
 from lerobot_omnid.calibration.frame_columns import (
     EXTRINSICS_NAMES,
@@ -62,18 +62,7 @@ def _expert_calibrations(seed: int, cameras: list[str], rig: str = "default") ->
 
 
 def _record(root: Path, rig: str, per_frame_calibration: bool, cameras: list[str] = CAMERAS) -> Path:
-    summary = record_dataset(
-        root,
-        episodes=1,
-        cameras=cameras,
-        image_size=SIZE,
-        rig=rig,
-        per_frame_calibration=per_frame_calibration,
-        repo_id=f"local/{root.name}",
-        show_progress=False,
-    )
-    assert summary.complete
-    return root
+    return record_rig(root, rig, per_frame_calibration, cameras, SIZE)
 
 
 @pytest.fixture(scope="module")
