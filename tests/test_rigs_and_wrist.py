@@ -1,0 +1,47 @@
+"""The commands of ``benchmarks/rigs_and_wrist.py`` (issue 19's measurements): each pair differs only where
+it should, and every evaluation gives the policy the evaluated rig's own calibration."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+import rigs_and_wrist as rw
+
+OUT = Path("out")
+
+
+def options(cmd: list[str]) -> dict[str, str]:
+    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
+
+
+@pytest.mark.parametrize("pair", sorted(rw.PAIRS))
+def test_pairs_train_with_the_same_steps_seed_and_options(pair):
+    first, second = (options(rw.train(OUT, m)) for m in rw.PAIRS[pair])
+    differ = {k for k in first.keys() | second.keys() if first.get(k) != second.get(k)}
+    expected = {"--dataset.repo_id", "--dataset.root", "--output_dir"}
+    assert differ == (expected | {"--policy.cameras"} if pair == "wrist" else expected)
+    assert first["--steps"] == str(rw.PROFILE.steps) and first["--seed"] == str(rw.TRAIN_SEED)
+
+
+def test_two_rigs_merge_the_default_and_closer_halves_into_the_size_of_one_rig():
+    merge = options(rw.merge(OUT))
+    assert merge["--operation.type"] == "merge"
+    parts = [Path(root).name for root in json.loads(merge["--operation.roots"])]
+    assert {rw.DATASETS[p][0] for p in parts} == {"default", "closer"}
+    assert sum(rw.DATASETS[p][2] for p in parts) == rw.DATASETS["default_bcde"][2]
+    # The unseen rigs are neither of the trained ones.
+    assert {r for r, _ in rw.EVALS["two_rigs"]} - {"default"} == {"higher", "bumped"}
+
+
+@pytest.mark.parametrize("blind", [False, True])
+def test_evaluations_read_the_rig_calibration_of_every_frame(blind):
+    cmd = options(rw.evaluate(OUT, "wrist", OUT / "ck", "higher", "id", 30, blind))
+    assert cmd["--env.rig"] == "higher" and cmd["--env.per_frame_calibration"] == "true"
+    assert "observation.images.cam_wrist" in cmd["--policy.frame_calibration"]
+    assert cmd["--eval.n_episodes"] == "30" and cmd["--seed"] == str(rw.EVAL_SEED)
+    assert ("--env.blackout_cameras" in cmd) == blind
+    if blind:
+        assert cmd["--env.blackout_cameras"] == cmd["--env.cameras"]
