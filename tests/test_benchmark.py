@@ -21,6 +21,7 @@ from omnid_jobs import Job, job
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import checkpoint_cameras
 from lerobot_omnid.benchmark.charts import bar_chart, position_curve_chart
+from lerobot_omnid.benchmark.commands import CHECKPOINT
 from lerobot_omnid.benchmark.outputs import BANDS_CM
 from lerobot_omnid.benchmark.plan import (
     ABLATIONS,
@@ -871,3 +872,27 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
     assert bench.main(["--profile", "gpu8", "--device", "cpu", "--out", str(tmp_path / "b")]) == 0
     assert calls.count("lerobot-train") == 2 and calls.count("omnid-record") == 1
     assert "position_band_2" in (tmp_path / "b" / "report.md").read_text()
+
+
+def test_mini_fewshot_profile_fine_tunes_minis_own_task0_models(tmp_path):
+    """``--profile mini-fewshot`` with mini's ``--out`` reuses mini's recordings and trainings (the same
+    commands, so the resumable runner skips them) and adds OmniD's camera-A fine-tuning on both tasks,
+    evaluated with camera A only; DP has no camera-A input to fine-tune (NOT_FINETUNABLE)."""
+    mini = by_name(build_plan(PROFILES["mini"], tmp_path, (TASK0,)))
+    fewshot = by_name(build_plan(PROFILES["mini-fewshot"], tmp_path, (TASK0,)))
+    for name, run in fewshot.items():
+        if name in mini:
+            assert run.cmd == mini[name].cmd, name
+    assert {
+        "train/omnid/select_apple",
+        "train/diffusion/select_apple",
+        "eval_blind/omnid/select_apple/id/seed1",
+    } <= set(mini) & set(fewshot)
+    for task in (TASK0, TASK1):
+        tuned = fewshot[f"finetune/omnid/{task}"]
+        assert flag(tuned.cmd, "policy.path") == str(tmp_path / "train" / "omnid" / TASK0 / CHECKPOINT)
+        assert flag(tuned.cmd, "steps") == str(PROFILES["mini"].finetune_steps)
+        assert flag(fewshot[f"eval/omnid/{task}/fewshot_a/seed1"].cmd, "env.cameras") == "[cam_a]"
+    assert not any(
+        n.startswith(("finetune/diffusion", "offline/", "record/select_apple_bcde_heldout")) for n in fewshot
+    )
