@@ -10,7 +10,7 @@ with Wilson intervals and Fisher tests), ``<out>/benchmark.png`` and ``<out>/pos
 ``--report-only --also <folder or summary.json> ...``).
 
     omnid-benchmark --dry-run          # the plan: settings, every command, what is already done
-    omnid-benchmark                    # profile mini: select_apple, OmniD vs DP, CPU (about 2.3 h on 2 cores)
+    omnid-benchmark                    # profile mini: select_apple, OmniD vs DP, CPU (1 h on 2 quiet cores)
     omnid-benchmark --profile paper    # every method, task and setting at the paper's sizes (GPU, days)
 
 Resumable: a run whose output is complete (a dataset with all its episodes, a final checkpoint, an
