@@ -132,6 +132,15 @@ def run(name: str, cmd: list[str], out: Path, bar: tqdm) -> None:
         raise SystemExit(f"{name} failed (exit code {returncode}); see {out / 'logs'}")
 
 
+def is_done(kind: str, target: Path) -> bool:
+    """Whether the run of ``kind`` that writes ``target`` finished (a record run: all its episodes)."""
+    if kind == "record":
+        return commands.recorded_episodes(target) == DATASETS[target.name][2]
+    if kind == "merge":
+        return (target / "meta" / "info.json").is_file()
+    return commands.is_trained(target) if kind == "train" else commands.is_evaluated(target)
+
+
 def cells() -> list[tuple[str, str, str, bool]]:
     """(model, rig, layout, blind) of every evaluation."""
     return [(m, r, lay, False) for m, ev in EVALS.items() for r, lay in ev] + [
@@ -224,14 +233,7 @@ def main() -> None:
         ]
         bar = tqdm(steps, desc="rigs_and_wrist", unit="run")
         for name, cmd, target in bar:
-            kind = name.split("/")[0]
-            done = {
-                "record": commands.recorded_episodes(target) == DATASETS[name.split("/")[1]][2],
-                "merge": (target / "meta" / "info.json").is_file(),
-                "train": commands.is_trained(target),
-                "eval": commands.is_evaluated(target),
-            }[kind]
-            if done:
+            if is_done(name.split("/")[0], target):
                 continue
             if target.exists():
                 shutil.rmtree(target)  # an incomplete run is rerun from scratch
