@@ -103,21 +103,19 @@ class BenchmarkProfile:
 # mini uses 64 px images: ResNet-18 forward+backward on a batch's 64 images takes 2.7 s at 96 px on some
 # 2-core machines, which would put the profile over its 2-hour budget; 64 px has 0.44x the pixels.
 # fmt: off
+MINI = BenchmarkProfile(
+    name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
+    image_size=64, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, eval_batch_size=5,
+    heldout_episodes=3,
+    eval_seeds=(1,), episode_length=200, settings=SETTINGS, control_settings=("id",),
+    train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cpu", num_workers=2, small=True,
+)
 PROFILES = {
-    "mini": BenchmarkProfile(
-        name="mini", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
-        image_size=64, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, eval_batch_size=5,
-        heldout_episodes=3,
-        eval_seeds=(1,), episode_length=200, settings=SETTINGS, control_settings=("id",),
-        train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cpu", num_workers=2, small=True,
-    ),
+    "mini": MINI,
     # Few-shot on camera A on a CPU: mini's task-0 models (same data, steps and seeds, so run it with mini's
     # --out to reuse them) fine-tuned on 10 camera-A episodes of select_apple and of select_chemistry_tube.
-    "mini-fewshot": BenchmarkProfile(
-        name="mini-fewshot", methods=("omnid", "diffusion"), tasks=(TASK0,), episodes=50, fewshot_episodes=10,
-        image_size=64, steps=1000, finetune_steps=200, batch_size=8, eval_episodes=10, eval_batch_size=5,
-        heldout_episodes=0, eval_seeds=(1,), episode_length=200, settings=("id",), control_settings=("id",),
-        train_seeds=(TRAIN_SEED,), fewshot=True, ablations=False, device="cpu", num_workers=2, small=True,
+    "mini-fewshot": dataclasses.replace(
+        MINI, name="mini-fewshot", heldout_episodes=0, settings=("id",), fewshot=True
     ),
     # One large GPU in about 8 minutes (not yet measured on one): mini's model sizes with 3x the steps and
     # 4x the batch, ID, one unseen table and one position band, 30 episodes per cell with the controls.
