@@ -15,7 +15,8 @@ Every model also gets a blind control in distribution: every camera black (``--e
 only the state drives it. ``--one-rig-checkpoint`` takes an OmniD trained by ``omnid-benchmark`` (the same
 50 scenes and options, calibration in the feature info) instead of training ``one_rig`` here; it is then
 told to read the env's per-frame calibration (``--policy.frame_calibration``). Resumable like the benchmark;
-writes ``<out>/report.md`` (Wilson 95 % intervals, Fisher tests of each pair) and ``<out>/summary.json``.
+writes ``<out>/report.md`` (Wilson 95 % intervals, Fisher tests of each pair, the code commit of each
+evaluation, kept beside it in ``commit.txt``) and ``<out>/summary.json``.
 
     MUJOCO_GL=egl python benchmarks/rigs_and_wrist.py --out outputs/rigs_and_wrist \\
         --one-rig-checkpoint outputs/bench_mini/train/omnid/select_apple/checkpoints/last/pretrained_model
@@ -26,13 +27,13 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import subprocess
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
 from tqdm import tqdm
 
 from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.benchmark import code_commit
 from lerobot_omnid.benchmark.plan import BANDS, PROFILES, TRAIN_SEED, method_flags
 from lerobot_omnid.benchmark.results import read_eval_info
 from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
@@ -59,6 +60,7 @@ EVALS = {  # model: (rig, layout) cells
     "wrist": [("default", "id"), *(("default", b) for b in BANDS)],
 }
 PAIRS = {"rigs": ("two_rigs", "one_rig"), "wrist": ("wrist", "one_rig")}
+COMMIT_FILE = "commit.txt"  # beside an evaluation's eval_info.json: the code commit that ran it
 
 
 def record(out: Path, name: str) -> list[str]:
@@ -154,10 +156,10 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
         info = eval_dir(out, model, rig, layout, blind) / "eval_info.json"
         if info.is_file():
             counts[model, rig, layout, blind] = read_eval_info(info)
-    commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     rows = []
     for (model, rig, layout, blind), (s, n) in counts.items():
         est = wilson_interval(s, n)
+        commit_file = eval_dir(out, model, rig, layout, blind) / COMMIT_FILE
         rows.append(
             {
                 "model": model,
@@ -169,9 +171,16 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
                 "rate": est.value,
                 "low": est.low,
                 "high": est.high,
+                "commit": commit_file.read_text().strip() if commit_file.is_file() else None,
             }
         )
-    lines = [f"# Per-frame calibration: rigs and wrist camera ({TASK}, mini sizes, commit {commit[:7]})", ""]
+    commits = ", ".join(sorted({str(r["commit"]) for r in rows})) or "none"
+    lines = [
+        f"# Per-frame calibration: rigs and wrist camera ({TASK}, mini sizes)",
+        "",
+        f"Commits: {commits}.",
+        "",
+    ]
     lines += ["| model | rig | layout | control | success | Wilson 95 % |", "|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(
@@ -187,7 +196,6 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
                 lines.append(f"| {pair}: {a} vs {b} | {rig} | {layout} | {sa}/{na} | {sb}/{nb} | {p:.3g} |")
     (out / "report.md").write_text("\n".join(lines) + "\n")
     summary = {
-        "commit": commit,
         "task": TASK,
         "episodes_per_cell": episodes,
         "eval_seed": EVAL_SEED,
@@ -225,19 +233,23 @@ def main() -> None:
         steps += [(f"train/{m}", train(out, m), out / "train" / m) for m in MODELS if m not in given]
         steps += [
             (
-                f"eval/{m}/{r}_{lay}{'_blind' if b else ''}",
+                f"eval/{m}/{eval_dir(out, m, r, lay, b).name}",
                 evaluate(out, m, checkpoints[m], r, lay, args.eval_episodes, b),
                 eval_dir(out, m, r, lay, b),
             )
             for m, r, lay, b in cells()
         ]
+        commit = code_commit()
         bar = tqdm(steps, desc="rigs_and_wrist", unit="run")
         for name, cmd, target in bar:
-            if is_done(name.split("/")[0], target):
+            kind = name.split("/")[0]
+            if is_done(kind, target):
                 continue
             if target.exists():
                 shutil.rmtree(target)  # an incomplete run is rerun from scratch
             run(name, cmd, out, bar)
+            if kind == "eval" and commit is not None:
+                (target / COMMIT_FILE).write_text(commit + "\n")
     report(out, args.eval_episodes, given)
 
 

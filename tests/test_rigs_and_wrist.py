@@ -45,3 +45,27 @@ def test_evaluations_read_the_rig_calibration_of_every_frame(blind):
     assert ("--env.blackout_cameras" in cmd) == blind
     if blind:
         assert cmd["--env.blackout_cameras"] == cmd["--env.cameras"]
+
+
+def test_report_gives_each_evaluation_its_own_commit_and_tests_the_pairs(tmp_path, capsys):
+    """The report reads the counts of every finished evaluation and the commit that ran it (not the commit
+    checked out when the report is written), and Fisher-tests each pair's shared cells."""
+    finished = {
+        ("two_rigs", "higher", "id", False): (7, "aaa"),
+        ("one_rig", "higher", "id", False): (4, "bbb"),
+    }
+    for (model, rig, layout, blind), (successes, commit) in finished.items():
+        folder = rw.eval_dir(tmp_path, model, rig, layout, blind)
+        folder.mkdir(parents=True)
+        overall = {"pc_success": 100 * successes / 30, "n_episodes": 30}
+        (folder / "eval_info.json").write_text(json.dumps({"overall": overall}))
+        (folder / rw.COMMIT_FILE).write_text(commit + "\n")
+    rw.report(tmp_path, 30, {})
+    rows = json.loads((tmp_path / "summary.json").read_text())["results"]
+    assert {(r["model"], r["successes"], r["commit"]) for r in rows} == {
+        ("two_rigs", 7, "aaa"),
+        ("one_rig", 4, "bbb"),
+    }
+    report = (tmp_path / "report.md").read_text()
+    assert "Commits: aaa, bbb." in report
+    assert "| rigs: two_rigs vs one_rig | higher | id | 7/30 | 4/30 | 0.506 |" in report
