@@ -151,6 +151,9 @@ def test_plan_cells_and_options_per_policy(tmp_path, calibrations):
     runs = build_runs([omnid, dp], settings, tmp_path / "out")
     assert len(runs) == 2 * (39 + 22) and len({r.name for r in runs}) == len(runs)
     assert {flag(r.cmd, "seed") for r in runs} == {"1000", "2000"}
+    assert {flag(r.cmd, "eval.batch_size") for r in runs} == {"3"}  # at most the episodes of a run
+    two_envs = build_runs([dp], dataclasses.replace(settings, batch_size=2), tmp_path / "out")
+    assert {flag(r.cmd, "eval.batch_size") for r in two_envs} == {"2"}
     by_name = {r.name: r for r in runs}
     calib = by_name["omnid/calibration/0.5cm_0.5deg/draw2/seed1"].cmd
     assert flag(calib, "policy.calibration_path").endswith(
@@ -282,6 +285,7 @@ def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations,
     text = capsys.readouterr().out
     assert "39 evaluations, 39 to run" in text and text.count("lerobot-eval --policy.path=") == 39
     assert "calibration error (scene unchanged) 12" in text
+    assert text.count("--eval.batch_size=5 ") == 39  # the mini benchmark's envs at once by default
     assert not out.exists()
 
 
@@ -292,6 +296,7 @@ def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations,
         (["--levels", "0,-1"], "--levels: expected numbers >= 0"),
         (["--draws", "0"], "--draws: expected an integer >= 1"),
         (["--eval-seeds", "0"], "--eval-seeds: expected positive integers"),
+        (["--eval-batch-size", "0"], "--eval-batch-size: expected an integer >= 1"),
         (["--dead-cameras", "cam_a"], "--dead-cameras: expected inputs of checkpoint omnid"),
         (["--conditions", "calibration,nope"], "--conditions: expected comma-separated distinct values"),
         (["--dry-run", "--report-only"], "expected at most one of them"),

@@ -131,6 +131,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="cameras killed in turn (default: each checkpoint's)",
     )
     parser.add_argument("--device", default="cpu", help="torch device of lerobot-eval (default cpu)")
+    parser.add_argument(
+        "--eval-batch-size",
+        type=int_at_least(1),
+        default=RobustnessSettings.batch_size,
+        help="envs each lerobot-eval runs at once (--eval.batch_size; default "
+        f"{RobustnessSettings.batch_size}, as the mini benchmark); the env seeds do not change",
+    )
     parser.add_argument("--dry-run", action="store_true", help="print every command, run nothing")
     parser.add_argument("--report-only", action="store_true", help="only rebuild the report from results")
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
@@ -303,6 +310,7 @@ def main(argv: list[str] | None = None) -> int:
         args.conditions,
         args.dead_cameras,
         args.device,
+        args.eval_batch_size,
     )
     out = args.out.resolve()
     folder_settings = check_settings(parser, out, settings, checkpoints)

@@ -145,6 +145,7 @@ class RobustnessSettings:
     groups: tuple[str, ...] = GROUPS
     dead_cameras: tuple[str, ...] | None = None  # None: every camera of each checkpoint
     device: str = "cpu"
+    batch_size: int = 5  # envs run at once by each lerobot-eval (episode i still has env seed seed + i)
 
     @property
     def mid_episode_step(self) -> int:
@@ -277,6 +278,7 @@ def build_runs(checkpoints: Sequence[Checkpoint], settings: RobustnessSettings, 
                     settings.device,
                     seed=k * EVAL_SEED_STRIDE,
                     extra=options,
+                    batch_size=min(settings.batch_size, settings.episodes),
                 )
                 result = (checkpoint.label, settings.task, cell.name)
                 name = f"{checkpoint.label}/{cell.name}/seed{k}"
