@@ -26,11 +26,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
-from tqdm import tqdm
 
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.benchmark import code_commit
@@ -60,7 +58,6 @@ EVALS = {  # model: (rig, layout) cells
     "wrist": [("default", "id"), *(("default", b) for b in BANDS)],
 }
 PAIRS = {"rigs": ("two_rigs", "one_rig"), "wrist": ("wrist", "one_rig")}
-COMMIT_FILE = "commit.txt"  # beside an evaluation's eval_info.json: the code commit that ran it
 
 
 def record(out: Path, name: str) -> list[str]:
@@ -127,13 +124,6 @@ def eval_dir(out: Path, model: str, rig: str, layout: str, blind: bool) -> Path:
     return out / "eval" / model / f"{rig}_{layout}{'_blind' if blind else ''}"
 
 
-def run(name: str, cmd: list[str], out: Path, bar: tqdm) -> None:
-    bar.set_postfix_str(name)
-    returncode = commands.run_logged(cmd, out / "logs" / f"{name.replace('/', '__')}.log")
-    if returncode != 0:
-        raise SystemExit(f"{name} failed (exit code {returncode}); see {out / 'logs'}")
-
-
 def is_done(kind: str, target: Path) -> bool:
     """Whether the run of ``kind`` that writes ``target`` finished (a record run: all its episodes)."""
     if kind == "record":
@@ -159,7 +149,7 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
     rows = []
     for (model, rig, layout, blind), (s, n) in counts.items():
         est = wilson_interval(s, n)
-        commit_file = eval_dir(out, model, rig, layout, blind) / COMMIT_FILE
+        commit_file = eval_dir(out, model, rig, layout, blind) / commands.COMMIT_FILE
         rows.append(
             {
                 "model": model,
@@ -239,17 +229,7 @@ def main() -> None:
             )
             for m, r, lay, b in cells()
         ]
-        commit = code_commit()
-        bar = tqdm(steps, desc="rigs_and_wrist", unit="run")
-        for name, cmd, target in bar:
-            kind = name.split("/")[0]
-            if is_done(kind, target):
-                continue
-            if target.exists():
-                shutil.rmtree(target)  # an incomplete run is rerun from scratch
-            run(name, cmd, out, bar)
-            if kind == "eval" and commit is not None:
-                (target / COMMIT_FILE).write_text(commit + "\n")
+        commands.run_steps(steps, out, "rigs_and_wrist", is_done, code_commit())
     report(out, args.eval_episodes, given)
 
 

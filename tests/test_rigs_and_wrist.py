@@ -59,7 +59,7 @@ def test_report_gives_each_evaluation_its_own_commit_and_tests_the_pairs(tmp_pat
         folder.mkdir(parents=True)
         overall = {"pc_success": 100 * successes / 30, "n_episodes": 30}
         (folder / "eval_info.json").write_text(json.dumps({"overall": overall}))
-        (folder / rw.COMMIT_FILE).write_text(commit + "\n")
+        (folder / rw.commands.COMMIT_FILE).write_text(commit + "\n")
     rw.report(tmp_path, 30, {})
     rows = json.loads((tmp_path / "summary.json").read_text())["results"]
     assert {(r["model"], r["successes"], r["commit"]) for r in rows} == {

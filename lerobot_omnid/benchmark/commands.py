@@ -7,6 +7,7 @@ what a finished one leaves behind, and a logged subprocess runner. Shared by the
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -14,12 +15,17 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from gym_omnid import WORKSPACE_BOUNDS
+from tqdm import tqdm
 
 BIN = Path(sys.executable).parent
 SIM_VOLUME_BOUNDS = json.dumps(WORKSPACE_BOUNDS, separators=(",", ":"))
 """``--policy.volume_bounds`` of the benchmark's OmniD runs: the envs' workspace, which holds every object."""
 CHECKPOINT = Path("checkpoints") / "last" / "pretrained_model"
 """Where ``lerobot-train`` leaves the final checkpoint, relative to its ``--output_dir``."""
+COMMIT_FILE = "commit.txt"
+"""Beside an evaluation's ``eval_info.json`` (scripts under ``benchmarks/``): the code commit that ran it."""
+Step = tuple[str, list[str], Path]
+"""A resumable run of a script: its name (``<kind>/...``), its command line and the folder it writes."""
 
 
 def json_list(items: Sequence[str]) -> str:
@@ -173,3 +179,30 @@ def run_stage(name: str, cmd: list[str], logs: Path) -> float:
     if returncode != 0:
         raise SystemExit(f"stage '{name}' failed (exit code {returncode}); see {logs / f'{name}.log'}")
     return time.perf_counter() - start
+
+
+def run_steps(
+    steps: Sequence[Step],
+    out: Path,
+    desc: str,
+    is_done: Callable[[str, Path], bool],
+    commit: str | None,
+) -> None:
+    """Run in order each step whose folder ``is_done(kind, folder)`` says is unfinished (kind: the name up to
+    its first ``/``), under a progress bar; an unfinished folder is removed first, so a run is never resumed
+    half-way. Each log goes to ``<out>/logs/``; an ``eval`` step's folder gets ``COMMIT_FILE``. Exits naming
+    the step and its log when a command fails."""
+    bar = tqdm(steps, desc=desc, unit="run")
+    for name, cmd, target in bar:
+        kind = name.split("/")[0]
+        if is_done(kind, target):
+            continue
+        if target.exists():
+            shutil.rmtree(target)
+        bar.set_postfix_str(name)
+        log = out / "logs" / f"{name.replace('/', '__')}.log"
+        returncode = run_logged(cmd, log)
+        if returncode != 0:
+            raise SystemExit(f"{name} failed (exit code {returncode}); see {log}")
+        if kind == "eval" and commit is not None:
+            (target / COMMIT_FILE).write_text(commit + "\n")

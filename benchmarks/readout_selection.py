@@ -1,0 +1,336 @@
+"""Choosing OmniD's plane readout on validation data, then testing only the choice against the paper's.
+
+The protocol (issue 18; docs/benchmark.md#choosing-the-readout), fixed in the commit that added this script,
+before any of its runs:
+
+1. *Candidates*: every readout of ``PLANE_READOUTS``, each an OmniD with the benchmark's ``mini`` options
+   (``select_apple``, its 50 training episodes, cameras B-E, 64 px, 1000 steps, batch 8,
+   ``lerobot-train --seed=1000``) but ``--policy.plane_readout``; ``flatten`` compresses the plane to one
+   channel as the paper does, the others keep ``mini``'s 16.
+2. *Validation*, never used for a reported number: (a) closed loop, ``lerobot-eval`` in the ID setting on env
+   seeds ``VALIDATION_SEED`` ... (20 episodes), disjoint from the training recordings (0 ...), the test
+   seeds (1000k, k = 1 .. 49), the few-shot (100000 ...) and the diagnostic's held-out episodes (200000
+   ...); (b) open loop, ``omnid-offline-eval`` on 10 expert episodes recorded from env seed
+   ``VALIDATION_HELDOUT_SEED``.
+3. *Rule* (:func:`select`): the readout with the most validation successes; among those within
+   ``TIE_MARGIN`` successes of the most, the lowest open-loop TCP error; written to ``selection.json``.
+4. *Test*, only once the selection exists (``--test``): the selected readout and ``flatten``, each on the
+   benchmark's test seeds (env seeds 1000 ..., 30 episodes) in ID, on the four unseen tables and in the
+   four position bands, with its blind control in ID; Wilson intervals and Fisher tests, selected vs
+   flatten. OmniD against DP with the selected readout is then ``omnid-benchmark``'s job.
+
+Resumable (a finished run is not run again); writes ``<out>/report.md`` and ``<out>/summary.json``.
+
+    MUJOCO_GL=egl python benchmarks/readout_selection.py --out outputs/readouts \\
+        --data outputs/bench_mini/data/select_apple_bcde          # train, validate, select
+    MUJOCO_GL=egl python benchmarks/readout_selection.py --out outputs/readouts --test   # then test
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from gym_omnid import TRAIN_CAMERAS
+
+from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.benchmark import code_commit
+from lerobot_omnid.benchmark.plan import (
+    BACKGROUND_OODS,
+    BANDS,
+    EVAL_SEED_STRIDE,
+    OFFLINE_OUTPUT,
+    PROFILES,
+    TASK0,
+    TRAIN_SEED,
+    control_flags,
+    method_flags,
+    setting_env,
+)
+from lerobot_omnid.benchmark.results import read_eval_info
+from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
+from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
+
+PROFILE = PROFILES["mini"]
+PAPER_READOUT = "flatten"
+READOUT_CHANNELS = {PAPER_READOUT: 1}  # compressed channels; others keep mini's
+VALIDATION_SEED = 50_000  # first env seed of the closed-loop validation episodes
+VALIDATION_EPISODES = 20
+VALIDATION_HELDOUT_SEED = 300_000  # first env seed of the open-loop validation recording
+VALIDATION_HELDOUT_EPISODES = 10
+TIE_MARGIN = 1  # validation successes within which the open-loop error decides
+TEST_SEED = EVAL_SEED_STRIDE  # the benchmark's eval seed 1: env seeds 1000 ...
+TEST_EPISODES = 30
+TEST_SETTINGS = ("id", *BACKGROUND_OODS, *BANDS)
+SELECTION_FILE = "selection.json"
+TRAIN_DATA = f"{TASK0}_bcde"
+HELDOUT_DATA = f"{TASK0}_bcde_validation"
+
+
+def train(out: Path, data: Path, readout: str, device: str) -> list[str]:
+    channels = READOUT_CHANNELS.get(readout)
+    flags = ["--policy.type=omnid", f"--policy.device={device}", "--policy.push_to_hub=false"]
+    for flag, _ in method_flags("omnid", PROFILE):
+        if flag.startswith("--policy.plane_readout="):
+            flag = f"--policy.plane_readout={readout}"
+        elif flag.startswith("--policy.compressed_channels=") and channels is not None:
+            flag = f"--policy.compressed_channels={channels}"
+        flags.append(flag)
+    return commands.train_command(
+        data, out / "train" / readout, flags, PROFILE.steps, PROFILE.batch_size, seed=TRAIN_SEED
+    )
+
+
+def checkpoint(out: Path, readout: str) -> Path:
+    return out / "train" / readout / commands.CHECKPOINT
+
+
+def eval_dir(out: Path, phase: str, readout: str, setting: str, control: str = "") -> Path:
+    return out / phase / readout / (f"{setting}_{control}" if control else setting)
+
+
+def control_file(out: Path, readout: str) -> Path:
+    return out / "controls" / readout / "blind.json"
+
+
+def evaluate(out: Path, phase: str, readout: str, setting: str, device: str, control: str = "") -> list[str]:
+    """``lerobot-eval`` of one readout: ``phase`` "validation" (ID, validation seeds) or "test"."""
+    seed, episodes = (
+        (VALIDATION_SEED, VALIDATION_EPISODES) if phase == "validation" else (TEST_SEED, TEST_EPISODES)
+    )
+    layout, background = setting_env(setting)
+    extra = [f"--env.episode_length={PROFILE.episode_length}"]
+    if control:
+        extra += [
+            flag for flag, _ in control_flags("omnid", control, TRAIN_CAMERAS, control_file(out, readout))
+        ]
+    return commands.eval_command(
+        checkpoint(out, readout),
+        eval_dir(out, phase, readout, setting, control),
+        TASK0,
+        layout,
+        TRAIN_CAMERAS,
+        PROFILE.image_size,
+        episodes,
+        device,
+        background,
+        seed=seed,
+        extra=extra,
+        batch_size=min(PROFILE.eval_batch_size, episodes),
+    )
+
+
+def offline(out: Path, readout: str, device: str) -> list[str]:
+    cmd = [str(commands.BIN / "omnid-offline-eval"), "--checkpoint", str(checkpoint(out, readout))]
+    cmd += ["--root", str(out / "data" / HELDOUT_DATA), "--device", device]
+    return [*cmd, "--out", str(out / "offline" / readout / OFFLINE_OUTPUT)]
+
+
+def blind_calibration(out: Path, readout: str) -> list[str]:
+    cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.control_calibration"]
+    return [
+        *cmd,
+        "--checkpoint",
+        str(checkpoint(out, readout)),
+        "--control",
+        "blind",
+        "--out",
+        str(control_file(out, readout)),
+    ]
+
+
+def is_done(kind: str, target: Path) -> bool:
+    if kind == "record":
+        episodes = VALIDATION_HELDOUT_EPISODES if target.name == HELDOUT_DATA else PROFILE.episodes
+        return commands.recorded_episodes(target) == episodes
+    if kind == "train":
+        return commands.is_trained(target)
+    if kind == "offline":
+        return (target / OFFLINE_OUTPUT).is_file()
+    if kind == "calibration":
+        return (target / "blind.json").is_file()
+    return commands.is_evaluated(target)
+
+
+def validation_steps(out: Path, data: Path, device: str) -> list[commands.Step]:
+    heldout = out / "data" / HELDOUT_DATA
+    record = commands.record_command(
+        TASK0,
+        VALIDATION_HELDOUT_EPISODES,
+        TRAIN_CAMERAS,
+        PROFILE.image_size,
+        heldout,
+        seed=VALIDATION_HELDOUT_SEED,
+    )
+    steps: list[commands.Step] = [(f"record/{HELDOUT_DATA}", record, heldout)]
+    for readout in PLANE_READOUTS:
+        steps.append((f"train/{readout}", train(out, data, readout, device), out / "train" / readout))
+        steps.append((f"offline/{readout}", offline(out, readout, device), out / "offline" / readout))
+        steps.append(
+            (
+                f"eval/validation/{readout}",
+                evaluate(out, "validation", readout, "id", device),
+                eval_dir(out, "validation", readout, "id"),
+            )
+        )
+    return steps
+
+
+def test_steps(out: Path, selected: str, device: str) -> list[commands.Step]:
+    steps: list[commands.Step] = []
+    for readout in dict.fromkeys((selected, PAPER_READOUT)):
+        steps.append(
+            (f"calibration/{readout}", blind_calibration(out, readout), control_file(out, readout).parent)
+        )
+        for setting in TEST_SETTINGS:
+            steps.append(
+                (
+                    f"eval/test/{readout}/{setting}",
+                    evaluate(out, "test", readout, setting, device),
+                    eval_dir(out, "test", readout, setting),
+                )
+            )
+        steps.append(
+            (
+                f"eval/test/{readout}/id_blind",
+                evaluate(out, "test", readout, "id", device, "blind"),
+                eval_dir(out, "test", readout, "id", "blind"),
+            )
+        )
+    return steps
+
+
+def validation_results(out: Path) -> dict[str, dict]:
+    """Per readout with a finished validation: its successes, episodes and open-loop errors."""
+    results = {}
+    for readout in PLANE_READOUTS:
+        info = eval_dir(out, "validation", readout, "id") / "eval_info.json"
+        errors = out / "offline" / readout / OFFLINE_OUTPUT
+        if info.is_file() and errors.is_file():
+            successes, episodes = read_eval_info(info)
+            offline_result = json.loads(errors.read_text())
+            results[readout] = {
+                "successes": successes,
+                "episodes": episodes,
+                "position_cm": offline_result["position_cm"],
+                "gripper": offline_result["gripper"],
+            }
+    return results
+
+
+def select(results: dict[str, dict]) -> str:
+    """The protocol's rule: most validation successes; among the readouts within ``TIE_MARGIN`` of the most,
+    the lowest open-loop TCP error (then the order of ``PLANE_READOUTS``)."""
+    best = max(r["successes"] for r in results.values())
+    close = [
+        name for name in PLANE_READOUTS if name in results and results[name]["successes"] >= best - TIE_MARGIN
+    ]
+    return min(close, key=lambda name: results[name]["position_cm"])
+
+
+def count_text(counts: list[int] | None) -> str:
+    """``s/n (low-high %)`` with the Wilson interval, or ``-`` for a cell not evaluated."""
+    if counts is None:
+        return "-"
+    est = wilson_interval(*counts)
+    return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
+
+
+def report(out: Path) -> dict:
+    """``report.md`` and ``summary.json`` from what is finished; returns the summary."""
+    validation = validation_results(out)
+    selection = json.loads((out / SELECTION_FILE).read_text()) if (out / SELECTION_FILE).is_file() else None
+    lines = [f"# Choosing the plane readout ({TASK0}, mini sizes)", ""]
+    seeds = f"env seeds {VALIDATION_SEED}-{VALIDATION_SEED + VALIDATION_EPISODES - 1}"
+    lines += [
+        f"Validation: ID success on {seeds}; open-loop error on {VALIDATION_HELDOUT_EPISODES} expert "
+        f"episodes from env seed {VALIDATION_HELDOUT_SEED}. Rule: most successes; within {TIE_MARGIN} of "
+        "the most, the lowest open-loop TCP error.",
+        "",
+        "| readout | validation success (Wilson 95 %) | open-loop TCP (cm) | gripper | selected |",
+        "|---|---|---|---|---|",
+    ]
+    for name, r in validation.items():
+        chosen = "**yes**" if selection and selection["selected"] == name else ""
+        lines.append(
+            f"| {name} | {count_text([r['successes'], r['episodes']])} | {r['position_cm']:.2f} | "
+            f"{r['gripper']:.3f} | {chosen} |"
+        )
+    test: dict[str, dict[str, list[int]]] = {}
+    for readout in PLANE_READOUTS:
+        for setting in (*TEST_SETTINGS, "id_blind"):
+            info = out / "test" / readout / setting / "eval_info.json"
+            if info.is_file():
+                test.setdefault(readout, {})[setting] = list(read_eval_info(info))
+    if test and selection:
+        chosen = selection["selected"]
+        lines += [
+            "",
+            f"Test: env seeds {TEST_SEED}-{TEST_SEED + TEST_EPISODES - 1}, the selected `{chosen}` against "
+            f"the paper's `{PAPER_READOUT}`.",
+            "",
+        ]
+        lines += ["| setting | " + " | ".join(test) + " | Fisher p |", "|---|" + "---|" * (len(test) + 1)]
+        for setting in (*TEST_SETTINGS, "id_blind"):
+            cells = [test[r].get(setting) for r in test]
+            p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 and all(cells) else ""
+            lines.append(f"| {setting} | " + " | ".join(map(count_text, cells)) + f" | {p} |")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    summary = {
+        "task": TASK0,
+        "steps": PROFILE.steps,
+        "train_seed": TRAIN_SEED,
+        "validation": {
+            "seed": VALIDATION_SEED,
+            "heldout_seed": VALIDATION_HELDOUT_SEED,
+            "results": validation,
+        },
+        "selection": selection,
+        "test": {"seed": TEST_SEED, "results": test},
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print("\n".join(lines))
+    return summary
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, default=Path("outputs/readouts"))
+    parser.add_argument(
+        "--data",
+        type=Path,
+        help=f"the mini benchmark's training set ({TRAIN_DATA}); default: recorded here",
+    )
+    parser.add_argument("--device", default="cpu", help="torch device of training and evaluation")
+    parser.add_argument(
+        "--test", action="store_true", help="evaluate the selected readout and flatten on the test seeds"
+    )
+    parser.add_argument("--report-only", action="store_true")
+    args = parser.parse_args(argv)
+    out = args.out.resolve()
+    data = args.data.resolve() if args.data else out / "data" / TRAIN_DATA
+    if args.data and (found := commands.recorded_episodes(data)) != PROFILE.episodes:
+        parser.error(f"--data: expected a dataset of {PROFILE.episodes} episodes, got {found} in {data}")
+    commit = code_commit()
+    if not args.report_only:
+        steps = validation_steps(out, data, args.device)
+        if not args.data:
+            record = commands.record_command(TASK0, PROFILE.episodes, TRAIN_CAMERAS, PROFILE.image_size, data)
+            steps.insert(0, (f"record/{TRAIN_DATA}", record, data))
+        commands.run_steps(steps, out, "readout validation", is_done, commit)
+        results = validation_results(out)
+        if not (out / SELECTION_FILE).is_file() and len(results) == len(PLANE_READOUTS):
+            selection = {"selected": select(results), "rule": select.__doc__, "commit": commit}
+            (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
+        if args.test:
+            selected = json.loads((out / SELECTION_FILE).read_text())["selected"]
+            commands.run_steps(test_steps(out, selected, args.device), out, "readout test", is_done, commit)
+    report(out)
+
+
+if __name__ == "__main__":
+    main()

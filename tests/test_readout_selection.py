@@ -1,0 +1,148 @@
+"""``benchmarks/readout_selection.py`` (issue 18's readout protocol): the candidates differ only in their
+readout, validation never touches a test or training seed, the rule picks as written, the test phase only
+evaluates the selected readout and the paper's, and the resumable runner (``commands.run_steps``) reruns
+only what is unfinished."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, HELDOUT_SEED, PROFILES
+from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+import readout_selection as rs
+
+OUT, DATA = Path("out"), Path("data")
+
+
+def options(cmd: list[str]) -> dict[str, str]:
+    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
+
+
+def test_candidates_differ_only_in_their_readout():
+    keypoints = options(rs.train(OUT, DATA, "keypoints", "cpu"))
+    assert keypoints["--policy.plane_readout"] == "keypoints" and keypoints["--steps"] == "1000"
+    for readout in PLANE_READOUTS:
+        other = options(rs.train(OUT, DATA, readout, "cpu"))
+        differ = {k for k in keypoints.keys() | other.keys() if keypoints.get(k) != other.get(k)}
+        expected = set() if readout == "keypoints" else {"--policy.plane_readout", "--output_dir"}
+        if readout == "flatten":  # the paper compresses the plane to one channel
+            expected.add("--policy.compressed_channels")
+            assert other["--policy.compressed_channels"] == "1"
+        assert differ == expected
+
+
+def env_seeds(first: int, episodes: int) -> set[int]:
+    return set(range(first, first + episodes))
+
+
+def test_validation_seeds_are_disjoint_from_training_test_and_other_recordings():
+    validation = env_seeds(rs.VALIDATION_SEED, rs.VALIDATION_EPISODES)
+    validation |= env_seeds(rs.VALIDATION_HELDOUT_SEED, rs.VALIDATION_HELDOUT_EPISODES)
+    paper = PROFILES["paper"]
+    test = {s for k in paper.eval_seeds for s in env_seeds(k * 1000, paper.eval_episodes)}
+    others = env_seeds(0, 1000) | env_seeds(FEWSHOT_SEED, 1000) | env_seeds(HELDOUT_SEED, 1000)
+    assert not validation & (test | others | env_seeds(rs.TEST_SEED, rs.TEST_EPISODES))
+    cmd = options(rs.evaluate(OUT, "validation", "bev_conv", "id", "cpu"))
+    assert cmd["--seed"] == str(rs.VALIDATION_SEED) and cmd["--eval.n_episodes"] == "20"
+    assert cmd["--env.layout"] == "id" and cmd["--env.background"] == "id"
+    record_cmd = rs.validation_steps(OUT, DATA, "cpu")[0][1]
+    assert record_cmd[record_cmd.index("--seed") + 1] == str(rs.VALIDATION_HELDOUT_SEED)
+
+
+def result(successes: int, position_cm: float) -> dict:
+    return {"successes": successes, "episodes": 20, "position_cm": position_cm, "gripper": 0.03}
+
+
+@pytest.mark.parametrize(
+    ("results", "expected"),
+    [
+        ({"flatten": result(3, 1.0), "keypoints": result(9, 2.0), "bev_conv": result(6, 0.5)}, "keypoints"),
+        # within one success of the most: the lower open-loop error decides
+        ({"flatten": result(3, 1.0), "keypoints": result(9, 2.0), "bev_conv": result(8, 0.5)}, "bev_conv"),
+        # equal on both: the order of PLANE_READOUTS (the paper's first)
+        ({"flatten": result(5, 1.0), "keypoints": result(5, 1.0)}, "flatten"),
+    ],
+)
+def test_selection_rule(results, expected):
+    assert rs.select(results) == expected
+
+
+def test_test_phase_evaluates_only_the_selected_readout_and_the_papers():
+    steps = rs.test_steps(OUT, "latent_queries", "cpu")
+    readouts = {name.split("/")[2] for name, _, _ in steps if name.startswith("eval/")}
+    assert readouts == {"latent_queries", "flatten"}
+    evals = [options(cmd) for name, cmd, _ in steps if name.startswith("eval/")]
+    assert {e["--seed"] for e in evals} == {str(rs.TEST_SEED)} and {
+        e["--eval.n_episodes"] for e in evals
+    } == {"30"}
+    assert len(evals) == 2 * (len(rs.TEST_SETTINGS) + 1)
+    blind = [e for e in evals if "--policy.calibration_path" in e]
+    assert len(blind) == 2 and all(e["--policy.calibration_path"].endswith("blind.json") for e in blind)
+    assert len(rs.test_steps(OUT, "flatten", "cpu")) == len(steps) // 2  # flatten selected: once
+
+
+def write_eval(folder: Path, successes: int, episodes: int) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    overall = {"pc_success": 100 * successes / episodes, "n_episodes": episodes}
+    (folder / "eval_info.json").write_text(json.dumps({"overall": overall}))
+
+
+def test_report_tables_the_validation_and_tests_selected_against_flatten(tmp_path):
+    for readout, (successes, position) in {"flatten": (2, 1.5), "bev_conv": (11, 0.7)}.items():
+        write_eval(rs.eval_dir(tmp_path, "validation", readout, "id"), successes, 20)
+        offline = tmp_path / "offline" / readout / rs.OFFLINE_OUTPUT
+        offline.parent.mkdir(parents=True)
+        offline.write_text(json.dumps({"position_cm": position, "gripper": 0.02}))
+    (tmp_path / rs.SELECTION_FILE).write_text(json.dumps({"selected": "bev_conv"}))
+    write_eval(rs.eval_dir(tmp_path, "test", "bev_conv", "id"), 7, 30)
+    write_eval(rs.eval_dir(tmp_path, "test", "flatten", "id"), 4, 30)
+    summary = rs.report(tmp_path)
+    assert summary["validation"]["results"]["bev_conv"]["successes"] == 11
+    text = (tmp_path / "report.md").read_text()
+    assert "| bev_conv | 11/20 (34.2-74.2 %) | 0.70 | 0.020 | **yes** |" in text
+    assert "| flatten | 2/20 (2.8-30.1 %) | 1.50 | 0.020 |  |" in text
+    assert "| id | 4/30 (5.3-29.7 %) | 7/30 (11.8-40.9 %) | 0.506 |" in text
+    assert "| ood1 | - | - |  |" in text
+
+
+def script(code: str) -> list[str]:
+    return [sys.executable, "-c", code]
+
+
+def test_run_steps_reruns_only_the_unfinished_and_names_a_failure(tmp_path):
+    done, unfinished, failing = tmp_path / "done", tmp_path / "unfinished", tmp_path / "failing"
+    write_eval(done, 1, 1)
+    unfinished.mkdir()
+    (unfinished / "stale.txt").write_text("left by an interrupted run")
+    write = "import json, pathlib, sys; p = pathlib.Path(sys.argv[1]); p.mkdir(parents=True, exist_ok=True); "
+    write += "(p / 'eval_info.json').write_text(json.dumps({'overall': {'pc_success': 0, 'n_episodes': 1}}))"
+    steps = [
+        ("eval/done", [*script("raise SystemExit(3)")], done),
+        ("eval/unfinished", [*script(write), str(unfinished)], unfinished),
+    ]
+    commands.run_steps(steps, tmp_path, "test", lambda kind, target: commands.is_evaluated(target), "abc")
+    assert not (unfinished / "stale.txt").exists() and commands.is_evaluated(unfinished)
+    assert (unfinished / commands.COMMIT_FILE).read_text() == "abc\n"
+    assert not (done / commands.COMMIT_FILE).exists()  # not run again
+    with pytest.raises(SystemExit, match=r"eval/failing failed \(exit code 3\); see .*eval__failing\.log"):
+        commands.run_steps(
+            [("eval/failing", script("raise SystemExit(3)"), failing)],
+            tmp_path,
+            "test",
+            lambda kind, target: False,
+            None,
+        )
+
+
+def test_data_of_another_size_is_refused(tmp_path, capsys):
+    data = tmp_path / "data"
+    (data / "meta").mkdir(parents=True)
+    (data / "meta" / "info.json").write_text(json.dumps({"total_episodes": 3}))
+    with pytest.raises(SystemExit):
+        rs.main(["--out", str(tmp_path / "out"), "--data", str(data)])
+    assert "--data: expected a dataset of 50 episodes, got 3" in capsys.readouterr().err
