@@ -39,6 +39,7 @@ from lerobot_omnid.benchmark.robustness_plan import (
 from lerobot_omnid.benchmark.robustness_report import (
     ANY_CAMERA,
     checkpoint_lines,
+    comparison_chart,
     comparison_lines,
     robustness_chart,
     table_rows,
@@ -216,6 +217,9 @@ def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
     assert not any("| cam_b |" in line for line in table)  # pooled rows only
     png = robustness_chart("omnid", rows, tmp_path / "chart.png")
     assert png.stat().st_size > 10_000
+    dp_rows = table_rows({Cell("nominal"): (5, 10), Cell("bumped", 1.0, 1): (2, 10), Cell("blind"): (1, 10)})
+    both = comparison_chart({"omnid": rows, "dp": dp_rows}, tmp_path / "both.png")
+    assert both.stat().st_size > 10_000
 
 
 def test_no_control_no_verdict_and_no_nominal():
@@ -261,6 +265,8 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, caps
     report = (out / "report.md").read_text()
     assert "## omnid" in report and "## diffusion" in report and "| omnid | diffusion |" in report
     assert (out / "robustness_omnid.png").is_file() and (out / "robustness_diffusion.png").is_file()
+    assert (out / robustness.COMPARISON_CHART).stat().st_size > 10_000
+    assert f"]({robustness.COMPARISON_CHART})" in report
     results = json.loads((out / "results.json").read_text())
     nominal = results["checkpoints"]["omnid"]["rows"][0]
     assert nominal["condition"] == "nominal" and nominal["successes"] == 4

@@ -58,6 +58,7 @@ from lerobot_omnid.benchmark.robustness_plan import (
 )
 from lerobot_omnid.benchmark.robustness_report import (
     checkpoint_lines,
+    comparison_chart,
     comparison_lines,
     pooled_rows,
     robustness_chart,
@@ -67,6 +68,8 @@ from lerobot_omnid.benchmark.robustness_report import (
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.cli import csv_of, int_at_least
 
+COMPARISON_CHART = "robustness_comparison.png"
+"""The checkpoints' curves side by side (written when more than one has results)."""
 SETTINGS_FILE = "robustness.json"
 """What the finished evaluations of an output folder depend on; a rerun with other values is refused."""
 FIXED = {  # settings field: option
@@ -264,6 +267,10 @@ def write_outputs(
         *comparison_lines(rows),
         "",
     ]
+    evaluated = {label: label_rows for label, label_rows in rows.items() if label_rows}
+    if len(evaluated) > 1:
+        chart = comparison_chart(evaluated, out / COMPARISON_CHART)
+        lines += [f"![the checkpoints side by side]({chart.name})", ""]
     for checkpoint in checkpoints:
         chart = None
         if rows[checkpoint.label]:

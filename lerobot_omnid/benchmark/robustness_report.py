@@ -251,3 +251,64 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def comparison_chart(rows_by_label: Mapping[str, Sequence[Row]], path: Path) -> Path:
+    """The checkpoints side by side: success (%) with Wilson intervals against L for the calibration error
+    and for the bumped cameras (L = 0: as trained), and per dead-camera variant pooled over the cameras,
+    each checkpoint's blind control as a dotted line of its colour (and, for the dead cameras, its rate as
+    trained dashed)."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), width_ratios=(1, 1, 0.9))
+    labels = list(rows_by_label)
+    colours = {label: f"C{i}" for i, label in enumerate(labels)}
+    for ax, condition in zip(axes, CURVES, strict=False):
+        for i, (label, rows) in enumerate(rows_by_label.items()):
+            points = sorted(
+                (r for r in rows if r.condition in (condition, "nominal")), key=lambda r: r.level or 0.0
+            )
+            if len(points) < 2:
+                continue  # this checkpoint has no such curve (e.g. DP has no calibration)
+            shift = (i - (len(labels) - 1) / 2) * SERIES_SHIFT * max(r.level or 0.0 for r in points)
+            ax.errorbar(
+                [(r.level or 0.0) + shift for r in points],
+                [r.result.rate for r in points],
+                yerr=error_bars([r.result for r in points]),
+                marker="o",
+                capsize=3,
+                color=colours[label],
+                label=label,
+            )
+        ax.set(title=LABELS[condition], xlabel="L (cm and degrees, every camera)", ylabel="success (%)")
+    ax_dead = axes[2]
+    for i, (label, rows) in enumerate(rows_by_label.items()):
+        points = [r for r in pooled_rows(rows) if r.condition in DEAD and r.camera == ANY_CAMERA]
+        shift = (i - (len(labels) - 1) / 2) * 3 * SERIES_SHIFT
+        ax_dead.errorbar(
+            [DEAD.index(r.condition) + shift for r in points],
+            [r.result.rate for r in points],
+            yerr=error_bars([r.result for r in points]),
+            marker="o",
+            ls="none",
+            capsize=3,
+            color=colours[label],
+            label=label,
+        )
+        nominal = next((r for r in rows if r.condition == "nominal"), None)
+        if nominal is not None:
+            ax_dead.axhline(nominal.result.rate, color=colours[label], ls="--", lw=1)
+    ax_dead.set_xticks(range(len(DEAD)), ["removed", "black", "black mid-episode"])
+    ax_dead.set(title="one camera dead (any one, pooled)", xlabel="variant", ylabel="success (%)")
+    for ax in axes:
+        for label, rows in rows_by_label.items():
+            blind = next((r for r in rows if r.condition == "blind"), None)
+            if blind is not None:
+                ax.axhline(blind.result.rate, color=colours[label], ls=":", lw=1.2)
+        ax.set_ylim(-2, 105)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize="small", title="dotted: blind control", title_fontsize="x-small")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
