@@ -179,6 +179,22 @@ def rows_json(rows: Sequence[Row]) -> list[dict[str, Any]]:
     ]
 
 
+def _plot_series(
+    ax: Any, x: Sequence[float], points: Sequence[Row], colour: str, label: str, joined: bool
+) -> None:
+    """The rates of ``points`` at ``x`` with their Wilson intervals as error bars, joined by a line or not."""
+    ax.errorbar(
+        x,
+        [r.result.rate for r in points],
+        yerr=error_bars([r.result for r in points]),
+        marker="o",
+        capsize=3,
+        color=colour,
+        label=label,
+        **({} if joined else {"ls": "none"}),
+    )
+
+
 def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
     """Success (%) with Wilson intervals against the perturbation level (calibration error, bumped cameras;
     level 0: as trained) and per dead camera, beside the controls (and, for the dead cameras, the rate as
@@ -202,15 +218,8 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
         points = [r for r in rows if r.condition == condition]
         points = sorted([*([nominal] if nominal else []), *points], key=lambda r: r.level)
         shift = (i - (len(curves) - 1) / 2) * SERIES_SHIFT * span
-        ax_curve.errorbar(
-            [r.level + shift for r in points],
-            [r.result.rate for r in points],
-            yerr=error_bars([r.result for r in points]),
-            marker="o",
-            capsize=3,
-            color=SERIES_COLOURS[condition],
-            label=LABELS[condition],
-        )
+        x = [r.level + shift for r in points]
+        _plot_series(ax_curve, x, points, SERIES_COLOURS[condition], LABELS[condition], joined=True)
     bands(ax_curve, with_nominal=False)
     ax_curve.set_xticks(levels)
     ax_curve.set(
@@ -226,16 +235,8 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
     for i, condition in enumerate(dead):
         points = [r for r in rows if r.condition == condition]
         shift = (i - (len(dead) - 1) / 2) * 3 * SERIES_SHIFT
-        ax_dead.errorbar(
-            [cameras.index(r.camera) + shift for r in points],
-            [r.result.rate for r in points],
-            yerr=error_bars([r.result for r in points]),
-            marker="o",
-            ls="none",
-            capsize=3,
-            color=SERIES_COLOURS[condition],
-            label=LABELS[condition],
-        )
+        x = [cameras.index(r.camera) + shift for r in points]
+        _plot_series(ax_dead, x, points, SERIES_COLOURS[condition], LABELS[condition], joined=False)
     bands(ax_dead, with_nominal=True)
     ax_dead.set_xticks(range(len(cameras)), cameras)
     ax_dead.set(
@@ -270,30 +271,14 @@ def comparison_chart(rows_by_label: Mapping[str, Sequence[Row]], path: Path) -> 
             if len(points) < 2:
                 continue  # this checkpoint has no such curve (e.g. DP has no calibration)
             shift = (i - (len(labels) - 1) / 2) * SERIES_SHIFT * max(r.level or 0.0 for r in points)
-            ax.errorbar(
-                [(r.level or 0.0) + shift for r in points],
-                [r.result.rate for r in points],
-                yerr=error_bars([r.result for r in points]),
-                marker="o",
-                capsize=3,
-                color=colours[label],
-                label=label,
-            )
+            _plot_series(ax, [(r.level or 0.0) + shift for r in points], points, colours[label], label, True)
         ax.set(title=LABELS[condition], xlabel="L (cm and degrees, every camera)", ylabel="success (%)")
     ax_dead = axes[2]
     for i, (label, rows) in enumerate(rows_by_label.items()):
         points = [r for r in pooled_rows(rows) if r.condition in DEAD and r.camera == ANY_CAMERA]
         shift = (i - (len(labels) - 1) / 2) * 3 * SERIES_SHIFT
-        ax_dead.errorbar(
-            [DEAD.index(r.condition) + shift for r in points],
-            [r.result.rate for r in points],
-            yerr=error_bars([r.result for r in points]),
-            marker="o",
-            ls="none",
-            capsize=3,
-            color=colours[label],
-            label=label,
-        )
+        x = [DEAD.index(r.condition) + shift for r in points]
+        _plot_series(ax_dead, x, points, colours[label], label, joined=False)
         nominal = next((r for r in rows if r.condition == "nominal"), None)
         if nominal is not None:
             ax_dead.axhline(nominal.result.rate, color=colours[label], ls="--", lw=1)
