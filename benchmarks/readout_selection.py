@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS
@@ -65,6 +64,7 @@ TEST_SEED = EVAL_SEED_STRIDE  # the benchmark's eval seed 1: env seeds 1000 ...
 TEST_EPISODES = 30
 TEST_SETTINGS = ("id", *BACKGROUND_OODS, *BANDS)
 SELECTION_FILE = "selection.json"
+BLIND_FILE = "blind.json"  # the blind control's calibration file of a readout
 TRAIN_DATA = f"{TASK0}_bcde"
 HELDOUT_DATA = f"{TASK0}_bcde_validation"
 
@@ -92,7 +92,7 @@ def eval_dir(out: Path, phase: str, readout: str, setting: str, control: str = "
 
 
 def control_file(out: Path, readout: str) -> Path:
-    return out / "controls" / readout / "blind.json"
+    return out / "controls" / readout / BLIND_FILE
 
 
 def evaluate(out: Path, phase: str, readout: str, setting: str, device: str, control: str = "") -> list[str]:
@@ -128,19 +128,6 @@ def offline(out: Path, readout: str, device: str) -> list[str]:
     return [*cmd, "--out", str(out / "offline" / readout / OFFLINE_OUTPUT)]
 
 
-def blind_calibration(out: Path, readout: str) -> list[str]:
-    cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.control_calibration"]
-    return [
-        *cmd,
-        "--checkpoint",
-        str(checkpoint(out, readout)),
-        "--control",
-        "blind",
-        "--out",
-        str(control_file(out, readout)),
-    ]
-
-
 def is_done(kind: str, target: Path) -> bool:
     if kind == "record":
         episodes = VALIDATION_HELDOUT_EPISODES if target.name == HELDOUT_DATA else PROFILE.episodes
@@ -150,7 +137,7 @@ def is_done(kind: str, target: Path) -> bool:
     if kind == "offline":
         return (target / OFFLINE_OUTPUT).is_file()
     if kind == "calibration":
-        return (target / "blind.json").is_file()
+        return (target / BLIND_FILE).is_file()
     return commands.is_evaluated(target)
 
 
@@ -182,7 +169,13 @@ def test_steps(out: Path, selected: str, device: str) -> list[commands.Step]:
     steps: list[commands.Step] = []
     for readout in dict.fromkeys((selected, PAPER_READOUT)):
         steps.append(
-            (f"calibration/{readout}", blind_calibration(out, readout), control_file(out, readout).parent)
+            (
+                f"calibration/{readout}",
+                commands.control_calibration_command(
+                    checkpoint(out, readout), "blind", control_file(out, readout)
+                ),
+                control_file(out, readout).parent,
+            )
         )
         for setting in TEST_SETTINGS:
             steps.append(
@@ -261,7 +254,7 @@ def report(out: Path) -> dict:
     test: dict[str, dict[str, list[int]]] = {}
     for readout in PLANE_READOUTS:
         for setting in (*TEST_SETTINGS, "id_blind"):
-            info = out / "test" / readout / setting / "eval_info.json"
+            info = eval_dir(out, "test", readout, setting) / "eval_info.json"
             if info.is_file():
                 test.setdefault(readout, {})[setting] = list(read_eval_info(info))
     if test and selection:
@@ -327,6 +320,10 @@ def main(argv: list[str] | None = None) -> None:
             selection = {"selected": select(results), "rule": select.__doc__, "commit": commit}
             (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
         if args.test:
+            if not (out / SELECTION_FILE).is_file():
+                parser.error(
+                    f"--test: expected every readout validated ({len(PLANE_READOUTS)}), got {len(results)}"
+                )
             selected = json.loads((out / SELECTION_FILE).read_text())["selected"]
             commands.run_steps(test_steps(out, selected, args.device), out, "readout test", is_done, commit)
     report(out)

@@ -140,6 +140,13 @@ def eval_command(
     ]
 
 
+def control_calibration_command(checkpoint: Path, control: str, out: Path) -> list[str]:
+    """Writes ``out``, the calibration file of OmniD's ``control`` (blind, scrambled) for ``checkpoint``
+    (:mod:`lerobot_omnid.benchmark.control_calibration`)."""
+    cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.control_calibration"]
+    return [*cmd, "--checkpoint", str(checkpoint), "--control", control, "--out", str(out)]
+
+
 def recorded_episodes(root: Path) -> int:
     """Episodes in the dataset at ``root`` (0 when there is none)."""
     info = root / "meta" / "info.json"

@@ -25,6 +25,7 @@ from tqdm import tqdm
 from lerobot_omnid.benchmark.commands import (
     CHECKPOINT,
     SIM_VOLUME_BOUNDS,
+    control_calibration_command,
     env_cameras,
     eval_command,
     is_evaluated,
@@ -230,17 +231,7 @@ def main(argv: list[str] | None = None) -> int:
         "train": train_command(
             dataset, train_dir, profile, args.device, "select_apple", TRAIN_CAMERAS, env_flags
         ),
-        "blind_calibration": [
-            sys.executable,
-            "-m",
-            "lerobot_omnid.benchmark.control_calibration",
-            "--checkpoint",
-            str(checkpoint),
-            "--control",
-            "blind",
-            "--out",
-            str(blind_file),
-        ],
+        "blind_calibration": control_calibration_command(checkpoint, "blind", blind_file),
         **{
             f"eval_{name}": eval_command(
                 checkpoint,

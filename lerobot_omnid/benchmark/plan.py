@@ -24,6 +24,7 @@ from gym_omnid.constants import POSITION_BANDS, STATE_DIM
 from lerobot_omnid.benchmark.commands import (
     BIN,
     SIM_VOLUME_BOUNDS,
+    control_calibration_command,
     eval_command,
     is_evaluated,
     is_trained,
@@ -506,9 +507,9 @@ def plan_models(
             needs: tuple[str, ...] = ()
             calibration_file = root / "controls" / method / TASK0 / f"{control}.json"
             if method == "omnid":
-                cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.control_calibration"]
-                cmd += ["--checkpoint", str(trained.output / CHECKPOINT_SUBDIR), "--control", control]
-                cmd += ["--out", str(calibration_file)]
+                cmd = control_calibration_command(
+                    trained.output / CHECKPOINT_SUBDIR, control, calibration_file
+                )
                 name = f"{prefix}calibration/{method}/{TASK0}/{control}"
                 run = Run(
                     name, "calibration", tuple(cmd), calibration_file, (trained.name,), train_seed=train_seed
