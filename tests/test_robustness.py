@@ -38,11 +38,13 @@ from lerobot_omnid.benchmark.robustness_plan import (
 )
 from lerobot_omnid.benchmark.robustness_report import (
     ANY_CAMERA,
+    between_lines,
     checkpoint_lines,
     comparison_chart,
     comparison_lines,
     robustness_chart,
     table_rows,
+    target_lines,
 )
 from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration
@@ -222,6 +224,47 @@ def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
     assert both.stat().st_size > 10_000
 
 
+def test_targets_are_shares_of_as_trained_counted_only_above_blind():
+    counts = {
+        Cell("nominal"): (8, 10),
+        Cell("calibration", 1.0, 1): (7, 10),
+        Cell("calibration", 2.0, 1): (1, 10),
+        Cell("dead_removed", camera="cam_b"): (2, 10),
+        Cell("dead_removed", camera="cam_c"): (4, 10),
+        Cell("dead_black", camera="cam_b"): (5, 10),
+        Cell("blind"): (0, 10),
+    }
+    lines = target_lines(table_rows(counts))
+    assert lines[0] == "Issue 20's targets (counted: significantly above its blind control):"
+    # 7/10 of 8/10 is 88 %; removed pooled 6/20 is 38 % (cam_b alone 25 %); black cam_b alone 62 %
+    assert "at 1 cm, 1 deg: 88 % of as trained (7/10; target >= 80 %): met" in lines[2]
+    assert (
+        "removed from the inputs, any one: 38 % of as trained (6/20; target >= 50 %): missed by 12 points"
+        in lines[3]
+    )
+    assert lines[3].endswith("worst camera cam_b 25 %")
+    assert "black from the first step, cam_b: 62 % of as trained (5/10; target >= 50 %): met" in lines[4]
+    weak = target_lines(table_rows({**counts, Cell("nominal"): (2, 10)}))
+    assert weak[0].startswith("Issue 20's targets (not counted: not significantly above its blind control)")
+    assert target_lines(table_rows({Cell("nominal"): (0, 10), Cell("calibration", 1.0, 1): (1, 10)})) == []
+
+
+def test_between_checkpoints_compares_every_pair_on_shared_rows():
+    a = table_rows(
+        {Cell("nominal"): (9, 10), Cell("bumped", 1.0, 1): (8, 10), Cell("calibration", 1.0, 1): (8, 10)}
+    )
+    b = table_rows({Cell("nominal"): (1, 10), Cell("bumped", 1.0, 1): (8, 10)})
+    c = table_rows({Cell("nominal"): (5, 10)})
+    lines = between_lines({"omnid": a, "omnid_noise": b, "dp": c})
+    assert lines[0] == "| Condition | Perturbation | omnid - omnid_noise | omnid - dp | omnid_noise - dp |"
+    assert lines[2].startswith("| as trained | none | +80 pp (")
+    assert "p = 0.0011" in lines[2]  # Fisher, 9/10 against 1/10
+    bumped = "| bumped cameras (calibration unchanged) | 1 cm, 1 deg | +0 pp (-34 to +34), p = 1 | - | - |"
+    assert lines[3] == bumped  # 8/10 both: Newcombe +-34
+    assert len(lines) == 4  # calibration error: only omnid has it
+    assert between_lines({"omnid": a}) == []
+
+
 def test_no_control_no_verdict_and_no_nominal():
     rows = table_rows({Cell("nominal"): (0, 4)})
     lines = checkpoint_lines("dp", "x", rows, None)
@@ -267,6 +310,7 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, caps
     assert (out / "robustness_omnid.png").is_file() and (out / "robustness_diffusion.png").is_file()
     assert (out / robustness.COMPARISON_CHART).stat().st_size > 10_000
     assert f"]({robustness.COMPARISON_CHART})" in report
+    assert "| Condition | Perturbation | omnid - diffusion |" in report and "Issue 20's targets" in report
     results = json.loads((out / "results.json").read_text())
     nominal = results["checkpoints"]["omnid"]["rows"][0]
     assert nominal["condition"] == "nominal" and nominal["successes"] == 4

@@ -57,6 +57,7 @@ from lerobot_omnid.benchmark.robustness_plan import (
     plan_cells,
 )
 from lerobot_omnid.benchmark.robustness_report import (
+    between_lines,
     checkpoint_lines,
     comparison_chart,
     comparison_lines,
@@ -268,6 +269,15 @@ def write_outputs(
         "",
     ]
     evaluated = {label: label_rows for label, label_rows in rows.items() if label_rows}
+    between = between_lines(evaluated)
+    if between:
+        lines += [
+            "Between checkpoints, on the same env seeds: the first one's rate minus the second's (pp) with "
+            "Newcombe's interval, two-sided Fisher exact test.",
+            "",
+            *between,
+            "",
+        ]
     if len(evaluated) > 1:
         chart = comparison_chart(evaluated, out / COMPARISON_CHART)
         lines += [f"![the checkpoints side by side]({chart.name})", ""]

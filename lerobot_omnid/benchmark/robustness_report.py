@@ -31,6 +31,9 @@ SERIES_COLOURS = {
 }
 SERIES_SHIFT = 0.06  # fraction of the spacing between x positions that series are shifted by, so bars show
 SIGNIFICANT = 0.05  # two-sided Fisher p below which a difference counts
+TARGET_LEVEL = 1.0  # issue 20: the calibration error (cm and degrees) at which ...
+TARGET_CALIBRATION_SHARE = 80.0  # ... at least this share (%) of the rate as trained is kept
+TARGET_DEAD_SHARE = 50.0  # and with one camera dead, at least this share
 
 
 @dataclass(frozen=True)
@@ -95,9 +98,59 @@ def _versus(row: CellResult, other: CellResult) -> str:
     return f"{100 * d.value:+.0f} pp ({100 * d.low:+.0f} to {100 * d.high:+.0f}), p = {p:.2g}"
 
 
+def _above(row: CellResult, control: CellResult) -> bool:
+    """Whether ``row`` is significantly above ``control`` (higher rate, two-sided Fisher p < 0.05)."""
+    p = fisher_exact(row.successes, row.episodes, control.successes, control.episodes)
+    return row.rate > control.rate and p < SIGNIFICANT
+
+
+def target_lines(rows: Sequence[Row]) -> list[str]:
+    """Issue 20's targets for one checkpoint: the share of its rate as trained kept at 1 cm / 1 degree of
+    calibration error (at least 80 %) and with one camera dead, per variant pooled over the cameras (at
+    least 50 %; the worst camera beside it); counted only where the checkpoint is significantly above its
+    blind control."""
+    found = {r.key: r for r in rows}
+    nominal = next((r for r in rows if r.condition == "nominal"), None)
+    blind = next((r for r in rows if r.condition == "blind"), None)
+    if nominal is None or not nominal.result.successes:
+        return []
+    if blind is None:
+        counted = "not counted: no blind control"
+    elif _above(nominal.result, blind.result):
+        counted = "counted: significantly above its blind control"
+    else:
+        counted = "not counted: not significantly above its blind control"
+    lines = [f"Issue 20's targets ({counted}):", ""]
+
+    def share(row: Row) -> float:
+        return 100 * row.result.rate / nominal.result.rate
+
+    def verdict(row: Row, target: float) -> str:
+        kept = share(row)
+        met = "met" if kept >= target else f"missed by {target - kept:.0f} points"
+        counts = f"{row.result.successes}/{row.result.episodes}"
+        return f"{kept:.0f} % of as trained ({counts}; target >= {target:.0f} %): {met}"
+
+    calibration = next((r for r in rows if r.condition == "calibration" and r.level == TARGET_LEVEL), None)
+    if calibration is not None:
+        kept = verdict(calibration, TARGET_CALIBRATION_SHARE)
+        lines.append(f"- {LABELS['calibration']} at {calibration.perturbation}: {kept}")
+    for condition in DEAD:
+        cameras = [r for r in rows if r.condition == condition and r.camera != ANY_CAMERA]
+        if not cameras:
+            continue
+        pooled = found.get((condition, ANY_CAMERA), cameras[0])
+        worst = min(cameras, key=lambda r: r.result.rate)
+        lines.append(
+            f"- {LABELS[condition]}, {pooled.camera}: {verdict(pooled, TARGET_DEAD_SHARE)}; worst camera "
+            f"{worst.camera} {share(worst):.0f} %"
+        )
+    return [*lines, ""] if len(lines) > 2 else []
+
+
 def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: str | None) -> list[str]:
     """A checkpoint's section of the report: its use of the cameras (as trained against its controls), the
-    table, the chart."""
+    issue's targets, the table, the chart."""
     lines = [f"## {label}", "", description, ""]
     found = {r.condition: r for r in rows if r.condition in ("nominal", *CONTROLS)}
     nominal = found.get("nominal")
@@ -106,19 +159,15 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
     for control in CONTROLS:
         if control in found:
             a, b = nominal.result, found[control].result
-            above = (
-                a.rate > b.rate
-                and fisher_exact(a.successes, a.episodes, b.successes, b.episodes) < SIGNIFICANT
-            )
-            verdict = "significantly above" if above else "not significantly above"
+            verdict = "significantly above" if _above(a, b) else "not significantly above"
             lines.append(f"- as trained against its {LABELS[control]}: {_versus(a, b)}: {verdict} it.")
     if "blind" in found:
         lines += [
             "",
             "A curve counts only for a checkpoint significantly above its blind control (issue 20).",
         ]
+    lines += ["", *target_lines(rows)]
     lines += [
-        "",
         "| Condition | Perturbation | Successes | Success % (Wilson 95 %) | Share of as trained | "
         "Against as trained | Per draw / camera |",
         "| --- | --- | --- | --- | --- | --- | --- |",
@@ -160,6 +209,32 @@ def comparison_lines(rows_by_label: Mapping[str, Sequence[Row]]) -> list[str]:
             r = cells[label].get((condition, perturbation))
             values.append(f"{_rate(r)}, {r.successes}/{r.episodes}" if r else "-")
         lines.append(f"| {LABELS[condition]} | {perturbation} | " + " | ".join(values) + " |")
+    return lines
+
+
+def between_lines(rows_by_label: Mapping[str, Sequence[Row]]) -> list[str]:
+    """Every pair of checkpoints (in the given order) on each pooled row both have: the difference of
+    their rates with Newcombe's interval and a two-sided Fisher test; empty for fewer than two."""
+    labels = list(rows_by_label)
+    pairs = [(a, b) for i, a in enumerate(labels) for b in labels[i + 1 :]]
+    cells = {label: {r.key: r.result for r in pooled_rows(rows)} for label, rows in rows_by_label.items()}
+    keys = [
+        k
+        for k in dict.fromkeys(k for c in cells.values() for k in c)
+        if sum(k in c for c in cells.values()) > 1
+    ]
+    if not pairs or not keys:
+        return []
+    lines = [
+        "| Condition | Perturbation | " + " | ".join(f"{a} - {b}" for a, b in pairs) + " |",
+        "| --- | --- |" + " --- |" * len(pairs),
+    ]
+    for key in keys:
+        values = [
+            _versus(cells[a][key], cells[b][key]) if key in cells[a] and key in cells[b] else "-"
+            for a, b in pairs
+        ]
+        lines.append(f"| {LABELS[key[0]]} | {key[1]} | " + " | ".join(values) + " |")
     return lines
 
 
