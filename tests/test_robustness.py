@@ -29,6 +29,7 @@ from lerobot_omnid.benchmark.results import CellResult
 from lerobot_omnid.benchmark.robustness_plan import (
     LEVELS,
     Cell,
+    Checkpoint,
     RobustnessSettings,
     build_runs,
     camera_offsets,
@@ -263,6 +264,14 @@ def test_between_checkpoints_compares_every_pair_on_shared_rows():
     assert lines[3] == bumped  # 8/10 both: Newcombe +-34
     assert len(lines) == 4  # calibration error: only omnid has it
     assert between_lines({"omnid": a}) == []
+
+
+def test_description_names_every_eval_seed_and_how_rows_pool_them():
+    checkpoint = Checkpoint("omnid", Path("ckpt"), "omnid", ("cam_b",), 64, {}, 1000)
+    one = robustness.describe(checkpoint, RobustnessSettings("select_apple", eval_seeds=(1,), episodes=10))
+    assert "env seeds 1000-1009, episodes" in one and "pools" not in one
+    two = robustness.describe(checkpoint, RobustnessSettings("select_apple", eval_seeds=(1, 2), episodes=10))
+    assert "env seeds 1000-1009, 2000-2009 (each row pools the eval seeds it ran on" in two
 
 
 def test_no_control_no_verdict_and_no_nominal():

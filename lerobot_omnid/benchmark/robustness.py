@@ -239,6 +239,8 @@ def describe(checkpoint: Checkpoint, settings: RobustnessSettings) -> str:
     seeds = ", ".join(
         f"{k * EVAL_SEED_STRIDE}-{k * EVAL_SEED_STRIDE + settings.episodes - 1}" for k in settings.eval_seeds
     )
+    if len(settings.eval_seeds) > 1:
+        seeds += " (each row pools the eval seeds it ran on: its episodes say how many)"
     return (
         f"`{checkpoint.path}` (policy `{checkpoint.policy_type}`, cameras {', '.join(checkpoint.cameras)}, "
         f"{checkpoint.image_size} px, training seed {checkpoint.train_seed}); {settings.task} ID, env seeds "
