@@ -189,6 +189,33 @@ class EnvOptions:
     env: EnvConfig
 
 
+def rows_of(counts: dict[Cell, tuple[int, int]]) -> list:
+    """Table rows of counts that all ran on eval seed 1."""
+    return table_rows({cell: {1: value} for cell, value in counts.items()})
+
+
+def test_rows_compare_with_as_trained_on_the_same_eval_seeds():
+    counts = {
+        Cell("nominal"): {1: (8, 10), 2: (2, 10)},  # seed 2's layouts are harder
+        Cell("calibration", 1.0, 1): {1: (6, 10)},
+        Cell("dead_black", camera="cam_b"): {1: (4, 10)},
+        Cell("dead_black", camera="cam_c"): {1: (4, 10), 2: (1, 10)},
+        Cell("blind"): {1: (0, 10), 2: (0, 10)},
+    }
+    rows = {r.key: r for r in table_rows(counts)}
+    assert rows[("nominal", "none")].result == CellResult(10, 20, ())
+    assert rows[("calibration", "1 cm, 1 deg")].as_trained == CellResult(8, 10, ())
+    assert rows[("dead_black", "cam_c")].as_trained == CellResult(10, 20, ())
+    assert rows[("dead_black", ANY_CAMERA)].as_trained == CellResult(10, 20, ())  # seeds of any part
+    assert rows[("blind", "-")].as_trained == CellResult(10, 20, ())
+    lines = "\n".join(checkpoint_lines("omnid", "x", list(rows.values()), None))
+    assert "| calibration error (scene unchanged) | 1 cm, 1 deg | 6/10 | 60 (31-83) | 75 % |" in lines
+    assert "against its blind control: +50 pp" in lines  # 10/20 against 0/20
+    assert "(6/10 against 8/10; target >= 80 %): missed by 5 points" in "\n".join(
+        target_lines(list(rows.values()))
+    )
+
+
 def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
     counts = {
         Cell("nominal"): (8, 10),
@@ -200,7 +227,7 @@ def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
         Cell("blind"): (0, 10),
         Cell("scrambled"): (2, 10),
     }
-    rows = table_rows(counts)
+    rows = rows_of(counts)
     keyed = {(r.condition, r.perturbation): r for r in rows}
     assert keyed[("calibration", "1 cm, 1 deg")].result.successes == 10
     assert keyed[("calibration", "1 cm, 1 deg")].parts == (("draw 1", 6, 10), ("draw 2", 4, 10))
@@ -211,7 +238,7 @@ def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
     assert "against its blind control: +80 pp" in lines and "significantly above it" in lines
     assert "| calibration error (scene unchanged) | 1 cm, 1 deg | 10/20 | 50 (30-70) | 62 % |" in lines
     assert "draw 1 6/10, draw 2 4/10" in lines and "![omnid" in lines
-    table = comparison_lines({"omnid": rows, "dp": table_rows({Cell("nominal"): (5, 10)})})
+    table = comparison_lines({"omnid": rows, "dp": rows_of({Cell("nominal"): (5, 10)})})
     assert table[0] == "| Condition | Perturbation | omnid | dp |"
     assert any(
         line.startswith("| dead camera, black from the first step | any one | 40 (22-61), 8/20 | - |")
@@ -220,7 +247,7 @@ def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
     assert not any("| cam_b |" in line for line in table)  # pooled rows only
     png = robustness_chart("omnid", rows, tmp_path / "chart.png")
     assert png.stat().st_size > 10_000
-    dp_rows = table_rows({Cell("nominal"): (5, 10), Cell("bumped", 1.0, 1): (2, 10), Cell("blind"): (1, 10)})
+    dp_rows = rows_of({Cell("nominal"): (5, 10), Cell("bumped", 1.0, 1): (2, 10), Cell("blind"): (1, 10)})
     both = comparison_chart({"omnid": rows, "dp": dp_rows}, tmp_path / "both.png")
     assert both.stat().st_size > 10_000
 
@@ -235,27 +262,30 @@ def test_targets_are_shares_of_as_trained_counted_only_above_blind():
         Cell("dead_black", camera="cam_b"): (5, 10),
         Cell("blind"): (0, 10),
     }
-    lines = target_lines(table_rows(counts))
+    lines = target_lines(rows_of(counts))
     assert lines[0] == "Issue 20's targets (counted: significantly above its blind control):"
     # 7/10 of 8/10 is 88 %; removed pooled 6/20 is 38 % (cam_b alone 25 %); black cam_b alone 62 %
-    assert "at 1 cm, 1 deg: 88 % of as trained (7/10; target >= 80 %): met" in lines[2]
+    assert "at 1 cm, 1 deg: 88 % of as trained (7/10 against 8/10; target >= 80 %): met" in lines[2]
     assert (
-        "removed from the inputs, any one: 38 % of as trained (6/20; target >= 50 %): missed by 12 points"
-        in lines[3]
+        "removed from the inputs, any one: 38 % of as trained (6/20 against 8/10; target >= 50 %): "
+        "missed by 12 points" in lines[3]
     )
     assert lines[3].endswith("worst camera cam_b 25 %")
-    assert "black from the first step, cam_b: 62 % of as trained (5/10; target >= 50 %): met" in lines[4]
-    weak = target_lines(table_rows({**counts, Cell("nominal"): (2, 10)}))
+    assert (
+        "black from the first step, cam_b: 62 % of as trained (5/10 against 8/10; target >= 50 %): met"
+        in lines[4]
+    )
+    weak = target_lines(rows_of({**counts, Cell("nominal"): (2, 10)}))
     assert weak[0].startswith("Issue 20's targets (not counted: not significantly above its blind control)")
-    assert target_lines(table_rows({Cell("nominal"): (0, 10), Cell("calibration", 1.0, 1): (1, 10)})) == []
+    assert target_lines(rows_of({Cell("nominal"): (0, 10), Cell("calibration", 1.0, 1): (1, 10)})) == []
 
 
 def test_between_checkpoints_compares_every_pair_on_shared_rows():
-    a = table_rows(
+    a = rows_of(
         {Cell("nominal"): (9, 10), Cell("bumped", 1.0, 1): (8, 10), Cell("calibration", 1.0, 1): (8, 10)}
     )
-    b = table_rows({Cell("nominal"): (1, 10), Cell("bumped", 1.0, 1): (8, 10)})
-    c = table_rows({Cell("nominal"): (5, 10)})
+    b = rows_of({Cell("nominal"): (1, 10), Cell("bumped", 1.0, 1): (8, 10)})
+    c = rows_of({Cell("nominal"): (5, 10)})
     lines = between_lines({"omnid": a, "omnid_noise": b, "dp": c})
     assert lines[0] == "| Condition | Perturbation | omnid - omnid_noise | omnid - dp | omnid_noise - dp |"
     assert lines[2].startswith("| as trained | none | +80 pp (")
@@ -271,11 +301,11 @@ def test_description_names_every_eval_seed_and_how_rows_pool_them():
     one = robustness.describe(checkpoint, RobustnessSettings("select_apple", eval_seeds=(1,), episodes=10))
     assert "env seeds 1000-1009, episodes" in one and "pools" not in one
     two = robustness.describe(checkpoint, RobustnessSettings("select_apple", eval_seeds=(1, 2), episodes=10))
-    assert "env seeds 1000-1009, 2000-2009 (each row pools the eval seeds it ran on" in two
+    assert "env seeds 1000-1009, 2000-2009 (each row pools the eval seeds it ran on and is compared" in two
 
 
 def test_no_control_no_verdict_and_no_nominal():
-    rows = table_rows({Cell("nominal"): (0, 4)})
+    rows = rows_of({Cell("nominal"): (0, 4)})
     lines = checkpoint_lines("dp", "x", rows, None)
     assert "| as trained | none | 0/4 | 0 (0-49) | n/a |" in "\n".join(lines)
     assert "No evaluation as trained yet." in checkpoint_lines("dp", "x", [], None)

@@ -221,17 +221,17 @@ def write_calibration_files(
 
 def cell_counts(
     checkpoint: Checkpoint, settings: RobustnessSettings, out: Path
-) -> dict[Cell, tuple[int, int]]:
-    """(successes, episodes) per finished cell of ``checkpoint``, pooled over the eval seeds found."""
+) -> dict[Cell, dict[int, tuple[int, int]]]:
+    """(successes, episodes) per finished cell of ``checkpoint`` and eval seed."""
     counts = {}
     for cell in plan_cells(checkpoint, settings):
-        found = [
-            read_eval_info(path)
+        found = {
+            k: read_eval_info(path)
             for k in settings.eval_seeds
             if (path := eval_dir(out, checkpoint, cell, k) / "eval_info.json").is_file()
-        ]
+        }
         if found:
-            counts[cell] = (sum(s for s, _ in found), sum(n for _, n in found))
+            counts[cell] = found
     return counts
 
 
@@ -240,7 +240,7 @@ def describe(checkpoint: Checkpoint, settings: RobustnessSettings) -> str:
         f"{k * EVAL_SEED_STRIDE}-{k * EVAL_SEED_STRIDE + settings.episodes - 1}" for k in settings.eval_seeds
     )
     if len(settings.eval_seeds) > 1:
-        seeds += " (each row pools the eval seeds it ran on: its episodes say how many)"
+        seeds += " (each row pools the eval seeds it ran on and is compared with as trained on the same ones)"
     return (
         f"`{checkpoint.path}` (policy `{checkpoint.policy_type}`, cameras {', '.join(checkpoint.cameras)}, "
         f"{checkpoint.image_size} px, training seed {checkpoint.train_seed}); {settings.task} ID, env seeds "

@@ -1,9 +1,11 @@
 """``omnid-robustness``'s tables and charts from success counts per cell (pure but for writing the PNG).
 
 A checkpoint's rows pool its cells: a perturbation level over its draws, a dead-camera variant per camera
-and over the cameras ("any one"). Every rate comes with its Wilson 95 % interval, its share of the rate as
-trained and a two-sided Fisher test against it; the blind and scrambled-geometry controls are rows of the
-table and horizontal bands of the chart.
+and over the cameras ("any one"), each over the eval seeds it ran on. Every rate comes with its Wilson 95 %
+interval, its share of the rate as trained and a two-sided Fisher test against it, as trained counted on
+the same eval seeds as the row (so a second eval seed of as trained and the controls alone does not mix
+env seeds into the curves' shares); the blind and scrambled-geometry controls are rows of the table and
+horizontal bands of the chart.
 """
 
 from __future__ import annotations
@@ -36,17 +38,23 @@ TARGET_CALIBRATION_SHARE = 80.0  # ... at least this share (%) of the rate as tr
 TARGET_DEAD_SHARE = 50.0  # and with one camera dead, at least this share
 
 
+Counts = tuple[int, int]
+"""(successes, episodes) of one evaluation."""
+
+
 @dataclass(frozen=True)
 class Row:
     """One line of a checkpoint's table: ``condition`` (a key of ``LABELS``) at ``level`` (curves) or for
-    ``camera`` (dead cameras; ``ANY_CAMERA`` pooled), the pooled ``result`` and its ``parts`` (per draw or
-    per camera: name, successes, episodes)."""
+    ``camera`` (dead cameras; ``ANY_CAMERA`` pooled), the pooled ``result``, its ``parts`` (per draw or
+    per camera: name, successes, episodes) and ``as_trained``, the rate as trained on the same eval seeds
+    (None for as trained itself or where it has none of them)."""
 
     condition: str
     result: CellResult
     level: float | None = None
     camera: str = ""
     parts: tuple[tuple[str, int, int], ...] = ()
+    as_trained: CellResult | None = None
 
     @property
     def perturbation(self) -> str:
@@ -63,27 +71,40 @@ def _pool(parts: Sequence[tuple[str, int, int]]) -> CellResult:
     return CellResult(sum(k for _, k, _ in parts), sum(n for _, _, n in parts), ())
 
 
-def table_rows(counts: Mapping[Cell, tuple[int, int]]) -> list[Row]:
-    """The rows of one checkpoint from its counts per cell (successes, episodes; pooled over eval seeds), in
-    the order as trained, calibration error and bumped cameras by level, dead cameras, controls; cells
+def _sum(counts: Sequence[Counts]) -> Counts:
+    return sum(k for k, _ in counts), sum(n for _, n in counts)
+
+
+def table_rows(counts: Mapping[Cell, Mapping[int, Counts]]) -> list[Row]:
+    """The rows of one checkpoint from its counts per cell and eval seed, each pooled over its eval seeds,
+    in the order as trained, calibration error and bumped cameras by level, dead cameras, controls; cells
     without counts are left out."""
+    nominal = counts.get(Cell("nominal"), {})
+    pooled = {cell: _sum(list(by_seed.values())) for cell, by_seed in counts.items()}
+
+    def row(condition: str, cells: Sequence[Cell], result: CellResult, **fields: Any) -> Row:
+        seeds = {k for c in cells for k in counts[c] if k in nominal}
+        as_trained = CellResult(*_sum([nominal[k] for k in sorted(seeds)]), ()) if seeds else None
+        return Row(condition, result, as_trained=as_trained, **fields)
+
     rows = []
-    if Cell("nominal") in counts:
-        rows.append(Row("nominal", CellResult(*counts[Cell("nominal")], ()), level=0.0))
+    if nominal:
+        rows.append(Row("nominal", CellResult(*pooled[Cell("nominal")], ()), level=0.0))
     for condition in CURVES:
         levels = sorted({c.level for c in counts if c.condition == condition})
         for level in levels:
             cells = [c for c in counts if c.condition == condition and c.level == level]
             cells.sort(key=lambda c: c.draw)
-            parts = tuple((f"draw {c.draw}", *counts[c]) for c in cells)
-            rows.append(Row(condition, _pool(parts), level=level, parts=parts))
+            parts = tuple((f"draw {c.draw}", *pooled[c]) for c in cells)
+            rows.append(row(condition, cells, _pool(parts), level=level, parts=parts))
     for condition in DEAD:
-        cells = [c for c in counts if c.condition == condition]
-        parts = tuple((c.camera, *counts[c]) for c in sorted(cells, key=lambda c: c.camera))
-        rows += [Row(condition, CellResult(k, n, ()), camera=cam) for cam, k, n in parts]
-        if len(parts) > 1:
-            rows.append(Row(condition, _pool(parts), camera=ANY_CAMERA, parts=parts))
-    rows += [Row(c, CellResult(*counts[Cell(c)], ())) for c in CONTROLS if Cell(c) in counts]
+        cells = sorted((c for c in counts if c.condition == condition), key=lambda c: c.camera)
+        rows += [row(condition, [c], CellResult(*pooled[c], ()), camera=c.camera) for c in cells]
+        if len(cells) > 1:
+            parts = tuple((c.camera, *pooled[c]) for c in cells)
+            rows.append(row(condition, cells, _pool(parts), camera=ANY_CAMERA, parts=parts))
+    controls = [Cell(c) for c in CONTROLS if Cell(c) in counts]
+    rows += [row(c.condition, [c], CellResult(*pooled[c], ())) for c in controls]
     return rows
 
 
@@ -114,21 +135,25 @@ def target_lines(rows: Sequence[Row]) -> list[str]:
     blind = next((r for r in rows if r.condition == "blind"), None)
     if nominal is None or not nominal.result.successes:
         return []
-    if blind is None:
+    if blind is None or blind.as_trained is None:
         counted = "not counted: no blind control"
-    elif _above(nominal.result, blind.result):
+    elif _above(blind.as_trained, blind.result):
         counted = "counted: significantly above its blind control"
     else:
         counted = "not counted: not significantly above its blind control"
     lines = [f"Issue 20's targets ({counted}):", ""]
 
     def share(row: Row) -> float:
-        return 100 * row.result.rate / nominal.result.rate
+        reference = row.as_trained or nominal.result
+        return 100 * row.result.rate / reference.rate if reference.successes else 0.0
 
     def verdict(row: Row, target: float) -> str:
         kept = share(row)
         met = "met" if kept >= target else f"missed by {target - kept:.0f} points"
-        counts = f"{row.result.successes}/{row.result.episodes}"
+        reference = row.as_trained or nominal.result
+        counts = (
+            f"{row.result.successes}/{row.result.episodes} against {reference.successes}/{reference.episodes}"
+        )
         return f"{kept:.0f} % of as trained ({counts}; target >= {target:.0f} %): {met}"
 
     calibration = next((r for r in rows if r.condition == "calibration" and r.level == TARGET_LEVEL), None)
@@ -158,7 +183,7 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
         return [*lines, "No evaluation as trained yet.", ""]
     for control in CONTROLS:
         if control in found:
-            a, b = nominal.result, found[control].result
+            a, b = found[control].as_trained or nominal.result, found[control].result
             verdict = "significantly above" if _above(a, b) else "not significantly above"
             lines.append(f"- as trained against its {LABELS[control]}: {_versus(a, b)}: {verdict} it.")
     if "blind" in found:
@@ -168,14 +193,15 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
         ]
     lines += ["", *target_lines(rows)]
     lines += [
-        "| Condition | Perturbation | Successes | Success % (Wilson 95 %) | Share of as trained | "
-        "Against as trained | Per draw / camera |",
+        "| Condition | Perturbation | Successes | Success % (Wilson 95 %) | "
+        "Share of as trained (same seeds) | Against as trained (same seeds) | Per draw / camera |",
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for row in rows:
         r = row.result
-        share = f"{100 * r.rate / nominal.result.rate:.0f} %" if nominal.result.successes else "n/a"
-        against = "" if row.condition == "nominal" else _versus(r, nominal.result)
+        reference = row.as_trained or nominal.result
+        share = f"{100 * r.rate / reference.rate:.0f} %" if reference.successes else "n/a"
+        against = "" if row.condition == "nominal" else _versus(r, reference)
         parts = ", ".join(f"{name} {k}/{n}" for name, k, n in row.parts)
         lines.append(
             f"| {LABELS[row.condition]} | {row.perturbation} | {r.successes}/{r.episodes} | {_rate(r)} | "
@@ -249,6 +275,9 @@ def rows_json(rows: Sequence[Row]) -> list[dict[str, Any]]:
             "success_rate": r.result.rate,
             "wilson_95": [100 * r.result.interval.low, 100 * r.result.interval.high],
             "parts": [list(p) for p in r.parts],
+            "as_trained_same_seeds": (
+                [r.as_trained.successes, r.as_trained.episodes] if r.as_trained else None
+            ),
         }
         for r in rows
     ]
