@@ -119,6 +119,11 @@ def _versus(row: CellResult, other: CellResult) -> str:
     return f"{100 * d.value:+.0f} pp ({100 * d.low:+.0f} to {100 * d.high:+.0f}), p = {p:.2g}"
 
 
+def _as_trained(row: Row, nominal: Row) -> CellResult:
+    """The rate as trained that ``row`` is compared with: on its eval seeds, else every seed's."""
+    return row.as_trained or nominal.result
+
+
 def _above(row: CellResult, control: CellResult) -> bool:
     """Whether ``row`` is significantly above ``control`` (higher rate, two-sided Fisher p < 0.05)."""
     p = fisher_exact(row.successes, row.episodes, control.successes, control.episodes)
@@ -144,13 +149,13 @@ def target_lines(rows: Sequence[Row]) -> list[str]:
     lines = [f"Issue 20's targets ({counted}):", ""]
 
     def share(row: Row) -> float:
-        reference = row.as_trained or nominal.result
+        reference = _as_trained(row, nominal)
         return 100 * row.result.rate / reference.rate if reference.successes else 0.0
 
     def verdict(row: Row, target: float) -> str:
         kept = share(row)
         met = "met" if kept >= target else f"missed by {target - kept:.0f} points"
-        reference = row.as_trained or nominal.result
+        reference = _as_trained(row, nominal)
         counts = (
             f"{row.result.successes}/{row.result.episodes} against {reference.successes}/{reference.episodes}"
         )
@@ -183,7 +188,7 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
         return [*lines, "No evaluation as trained yet.", ""]
     for control in CONTROLS:
         if control in found:
-            a, b = found[control].as_trained or nominal.result, found[control].result
+            a, b = _as_trained(found[control], nominal), found[control].result
             verdict = "significantly above" if _above(a, b) else "not significantly above"
             lines.append(f"- as trained against its {LABELS[control]}: {_versus(a, b)}: {verdict} it.")
     if "blind" in found:
@@ -199,7 +204,7 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
     ]
     for row in rows:
         r = row.result
-        reference = row.as_trained or nominal.result
+        reference = _as_trained(row, nominal)
         share = f"{100 * r.rate / reference.rate:.0f} %" if reference.successes else "n/a"
         against = "" if row.condition == "nominal" else _versus(r, reference)
         parts = ", ".join(f"{name} {k}/{n}" for name, k, n in row.parts)
