@@ -67,12 +67,12 @@ class Row:
         return self.condition, self.perturbation
 
 
-def _pool(parts: Sequence[tuple[str, int, int]]) -> CellResult:
-    return CellResult(sum(k for _, k, _ in parts), sum(n for _, _, n in parts), ())
-
-
 def _sum(counts: Sequence[Counts]) -> Counts:
     return sum(k for k, _ in counts), sum(n for _, n in counts)
+
+
+def _pool(parts: Sequence[tuple[str, int, int]]) -> CellResult:
+    return CellResult(*_sum([(k, n) for _, k, n in parts]), ())
 
 
 def table_rows(counts: Mapping[Cell, Mapping[int, Counts]]) -> list[Row]:
