@@ -5,9 +5,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from gym_omnid import TRAIN_CAMERAS
 from omnid_jobs import Job, job
 
-from lerobot_omnid.benchmark.demo import blind_margin, main, write_report
+from lerobot_omnid.benchmark.demo import PROFILES, blind_margin, main, train_command, write_report
+from lerobot_omnid.benchmark.plan import MINI, method_flags
 
 OMNID_DEMO = Path(sys.executable).parent / "omnid-demo"
 TINY = ["--episodes", "2", "--steps", "2", "--eval-episodes", "1", "--episode-length", "10"]
@@ -63,3 +65,15 @@ def test_bad_arguments_name_the_option(argv, message, capsys):
     with pytest.raises(SystemExit):
         main(argv)
     assert message in capsys.readouterr().err
+
+
+def test_cpu_profile_trains_the_benchmark_mini_omnid(tmp_path):
+    """The main job's CPU profile is the `mini` OmniD, the checkpoint measured above its blind control."""
+    cmd = train_command(
+        tmp_path / "data", tmp_path / "train", PROFILES["cpu"], "cpu", "select_apple", TRAIN_CAMERAS
+    )
+    mini = [flag for flag, _ in method_flags("omnid", MINI)]
+    assert set(mini) <= set(cmd)
+    assert f"--steps={MINI.steps}" in cmd and f"--batch_size={MINI.batch_size}" in cmd
+    assert (PROFILES["cpu"].episodes, PROFILES["cpu"].image_size) == (MINI.episodes, MINI.image_size)
+    assert sum(flag.startswith("--policy.cameras=") for flag in cmd) == 1
