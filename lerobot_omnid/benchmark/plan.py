@@ -217,9 +217,7 @@ def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
                     "--policy.plane_readout=keypoints",
                     "short run: the plane is read out as 16 soft-argmax keypoints in the base frame instead "
                     "of flattened (the paper's), selected on validation seeds among five readouts "
-                    "(benchmarks/readout_selection.py: 13/20 validation successes; flatten, latent queries "
-                    "and the BEV conv head 0/20, keypoints with features 3/20). On the test seeds the "
-                    "flattened 1000-step OmniD scored as its blind control (2/30 both; keypoints 24/30)",
+                    "(benchmarks/readout_selection.py; numbers in docs/results.md)",
                 ),
                 ("--policy.compressed_channels=16", "see plane_readout: 16 keypoints"),
             ]
