@@ -65,16 +65,15 @@ def benchmark_omnid_flags(profile: BenchmarkProfile) -> tuple[str, ...]:
     )
 
 
-# The CPU profile is the benchmark's `mini` OmniD (the same data size, images, steps and options), whose
-# checkpoint beat its blind control (7/10 against 0/10, docs/results.md); the earlier profile (20 episodes
-# at 96 px, 600 steps) could not be told apart from its blind control (3/10 against 2/10).
+# The CPU profile is the benchmark's `mini` OmniD (the same data size, images, steps and options): the
+# smallest run measured above its blind control (docs/results.md#main-job-omnid-demo).
 PROFILES = {
     "cpu": Profile(
         episodes=MINI.episodes,
         image_size=MINI.image_size,
-        steps=MINI.steps,  # about 1.05 s a step on 2 cores: ~18 minutes
+        steps=MINI.steps,
         batch_size=MINI.batch_size,
-        eval_episodes=10,  # 5 envs at once: about a minute for 10 episodes
+        eval_episodes=10,
         policy_flags=benchmark_omnid_flags(MINI),
     ),
     "gpu": Profile(
