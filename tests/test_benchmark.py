@@ -16,6 +16,7 @@ from pathlib import Path
 import draccus
 import gym_omnid.constants
 import pytest
+import torch
 from omnid_jobs import Job, job
 
 import lerobot_omnid.benchmark.benchmark as bench
@@ -30,6 +31,7 @@ from lerobot_omnid.benchmark.plan import (
     CONTROLS,
     FEWSHOT_SEED,
     HELDOUT_SEED,
+    METHODS,
     PROFILES,
     SETTINGS,
     TASK0,
@@ -162,8 +164,8 @@ def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
     assert flag(vqbet, "policy.n_vqvae_training_steps") == "20000"
     assert flag(runs["eval/vqbet/select_apple/id/seed1"].cmd, "env.cameras") == "[cam_b]"
     assert flag(runs["train/act/select_apple"].cmd, "policy.chunk_size") == "16"
-    # Few-shot: the task-0 checkpoint, fine-tuned on camera-A sets of task 0 and task 1; DP cannot be.
-    for m in ("omnid", "act", "vqbet"):
+    # Few-shot: every method's task-0 checkpoint, fine-tuned on camera-A sets of task 0 and task 1.
+    for m in METHODS:
         for task in (TASK0, TASK1):
             run = runs[f"finetune/{m}/{task}"]
             assert flag(run.cmd, "dataset.root") == str(tmp_path / "data" / f"{task}_a_fewshot")
@@ -173,7 +175,7 @@ def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
     omnid = runs["finetune/omnid/select_apple"]
     assert flag(omnid.cmd, "policy.path") == task0_checkpoint and "train/omnid/select_apple" in omnid.needs
     assert flag(omnid.cmd, "policy.cameras") == '["cam_a"]'
-    for m in ("act", "vqbet"):  # a copy of the task-0 checkpoint with camera A as its image input
+    for m in ("diffusion", "act", "vqbet"):  # a copy of the task-0 checkpoint with camera A as its input
         prepare = runs[f"prepare/{m}/cam_a"]
         assert prepare.needs == (f"train/{m}/{TASK0}",)
         assert prepare.cmd[prepare.cmd.index("--src") + 1] == task0_checkpoint.replace("/omnid/", f"/{m}/")
@@ -183,7 +185,6 @@ def test_paper_plan_every_method_task_fewshot_and_ablation(tmp_path):
             assert flag(run.cmd, "policy.path") == str(prepare.output) and prepare.name in run.needs
             assert flag(run.cmd, "policy.input_features") is None
     assert flag(runs["finetune/vqbet/select_apple"].cmd, "policy.n_vqvae_training_steps") == "0"
-    assert not any(name.startswith("finetune/diffusion") for name in runs)
     assert flag(runs["record/select_apple_a_fewshot"].cmd, "seed") is None  # omnid-record: "--seed N"
     record = runs["record/select_chemistry_tube_a_fewshot"].cmd
     assert record[record.index("--seed") + 1] == "100000" and record[record.index("--episodes") + 1] == "10"
@@ -369,10 +370,11 @@ def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, ca
     monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
     assert bench.main(["--profile", "paper", "--dry-run", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    # One training run per method and task, three ablations, six few-shot fine-tunes.
-    n_train = 4 * len(gym_omnid.constants.TASKS) + 9
-    assert out.count("lerobot-train ") == n_train and out.count("checkpoint_cameras --src") == 2
-    assert "n/a" in out and "Plan: " in out
+    # One training run per method and task, three ablations, eight few-shot fine-tunes (every method, two
+    # tasks); DP, ACT and VQ-BeT start from a copy whose image input is camera A.
+    n_train = 4 * len(gym_omnid.constants.TASKS) + 11
+    assert out.count("lerobot-train ") == n_train and out.count("checkpoint_cameras --src") == 3
+    assert "Plan: " in out
     assert not any(tmp_path.iterdir())
 
 
@@ -428,9 +430,8 @@ def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
     assert (
         table[3] == "| DP | **80.0 (49.0-94.3)** | — | 80.0 (49.0-94.3)* |"
     )  # average of the evaluated tasks
-    n_a = {("diffusion", TASK0, "fewshot_a"), ("diffusion", TASK1, "fewshot_a")}
     table = generalisation_table(
-        results, ("omnid", "diffusion"), TASK0, TASK1, ("ood1", "ood2", "ood3", "ood4"), n_a, LABELS
+        results, ("omnid", "diffusion"), TASK0, TASK1, ("ood1", "ood2", "ood3", "ood4"), LABELS
     )
     assert table[0] == (
         "| Method | Task 0 ID | Position OOD | Background ood1 | Background ood2 | Background ood3 | "
@@ -440,7 +441,7 @@ def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
         "| OmniD | 50.0 (23.7-76.3) | — | 10.0 (1.8-40.4) | 20.0 (5.7-51.0) | — | 40.0 (16.8-68.7) | — | "
         "30.0 (10.8-60.3) |"
     )
-    assert table[3] == "| DP | **80.0 (49.0-94.3)** | — | — | — | — | — | n/a | n/a |"
+    assert table[3] == "| DP | **80.0 (49.0-94.3)** | — | — | — | — | — | — | — |"
     table = ablation_table(results, TASK0)
     assert table[0] == "|  | ResNet-101 | w/o OFG | Camera A | Base model |"
     assert table[2] == "| ResNet-18 |  | ✓ | ✓ | ✓ |" and table[4] == "| OFG module | ✓ |  | ✓ | ✓ |"
@@ -683,6 +684,51 @@ def test_real_tools_end_to_end_tiny(jobs):
     assert "open-loop action error" in report
 
 
+@job("benchmark_fewshot", seconds=150)
+def _real_tools_fewshot_tiny(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
+    """``--profile mini-fewshot`` on the tiny mini run's folder: its task-0 models fine-tuned on camera A."""
+    mini, first = job.result("benchmark")
+    if first.returncode != 0:
+        return mini, first
+    out = job.tmp / "bench"  # a copy: the mini test reads its own folder's results
+    shutil.copytree(mini, out)
+    argv = [str(Path(sys.executable).parent / "omnid-benchmark"), "--profile", "mini-fewshot"]
+    argv += ["--out", str(out), "--episodes", "1", "--steps", "2", "--batch-size", "2", "--image-size", "64"]
+    argv += [
+        "--num-workers",
+        "0",
+        "--eval-episodes",
+        "1",
+        "--episode-length",
+        "10",
+        "--fewshot-episodes",
+        "1",
+    ]
+    argv += ["--finetune-steps", "2"]
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    return out, job.run(argv, timeout=900, env=env)
+
+
+@pytest.mark.slow
+@pytest.mark.jobs("benchmark", "benchmark_fewshot")
+def test_real_tools_fewshot_tiny(jobs):
+    """Both task-0 models fine-tuned on camera A of both tasks through the real lerobot-train, DP from its
+    one-camera copy, and evaluated with camera A; mini's trainings are reused, not rerun."""
+    out, proc = jobs.result("benchmark_fewshot")
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    cells = {
+        (c["model"], c["task"], c["setting"]) for c in json.loads((out / "results.json").read_text())["cells"]
+    }
+    for model in ("omnid", "diffusion"):
+        for task in (TASK0, TASK1):
+            assert (model, task, "fewshot_a") in cells
+    copy = json.loads((out / "finetune" / "diffusion" / "start_cam_a" / "config.json").read_text())
+    assert [k for k in copy["input_features"] if k.startswith("observation.images.")] == [
+        "observation.images.cam_a"
+    ]
+    assert "train/omnid/select_apple: done" not in proc.stdout + proc.stderr  # reused, not retrained
+
+
 def test_checkpoint_copy_with_other_cameras(tmp_path, capsys):
     src = tmp_path / "pretrained_model"
     src.mkdir()
@@ -705,6 +751,61 @@ def test_checkpoint_copy_with_other_cameras(tmp_path, capsys):
     with pytest.raises(SystemExit):
         checkpoint_cameras.main(["--src", str(tmp_path / "nowhere"), "--dst", str(dst), "--cameras", "cam_a"])
     assert "--src" in capsys.readouterr().err
+
+
+def test_fold_camera_columns_sums_each_steps_camera_blocks():
+    # E=1, 2 obs steps of [state 1, 2 cameras x F=2, env 1]: columns e | s0 a0 a1 b0 b1 v0 | s1 ...
+    weight = torch.arange(13.0).reshape(1, 13)
+    folded = checkpoint_cameras.fold_camera_columns(weight, 1, 2, before=1, after=1, n_cameras=2)
+    assert folded.tolist() == [[0.0, 1.0, 2 + 4, 3 + 5, 6.0, 7.0, 8 + 10, 9 + 11, 12.0]]
+    with pytest.raises(ValueError, match="columns, got 13"):
+        checkpoint_cameras.fold_camera_columns(weight, 1, 2, before=1, after=1, n_cameras=3)
+
+
+def test_diffusion_copy_with_one_camera_acts_as_the_camera_in_every_slot(tmp_path):
+    """LeRobot's DP with a shared encoder, copied from two cameras to camera A: the copy's noise prediction
+    on camera A's images equals the original's given those images from both cameras."""
+    from lerobot.configs.types import FeatureType, PolicyFeature
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+    from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+    from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
+
+    image = PolicyFeature(type=FeatureType.VISUAL, shape=(3, 32, 32))
+    config = DiffusionConfig(
+        input_features={
+            OBS_STATE: PolicyFeature(type=FeatureType.STATE, shape=(5,)),
+            "observation.images.cam_b": image,
+            "observation.images.cam_c": image,
+        },
+        output_features={"action": PolicyFeature(type=FeatureType.ACTION, shape=(4,))},
+        down_dims=(16, 32),
+        horizon=8,
+        n_action_steps=4,
+        crop_shape=None,
+        pretrained_backbone_weights=None,
+        use_group_norm=True,
+        use_separate_rgb_encoder_per_camera=False,
+        device="cpu",
+    )
+    torch.manual_seed(0)
+    DiffusionPolicy(config).save_pretrained(tmp_path / "two")
+    checkpoint_cameras.retarget_cameras(tmp_path / "two", tmp_path / "one", ["cam_a"])
+    two = DiffusionPolicy.from_pretrained(tmp_path / "two").eval()
+    one = DiffusionPolicy.from_pretrained(tmp_path / "one").eval()
+    assert list(one.config.image_features) == ["observation.images.cam_a"]
+    state, images = torch.randn(3, 2, 5), torch.rand(3, 2, 1, 3, 32, 32)
+    noisy, t = torch.randn(3, 8, 4), torch.tensor([3, 50, 99])
+    with torch.no_grad():
+        cond_two = two.diffusion._prepare_global_conditioning(
+            {OBS_STATE: state, OBS_IMAGES: images.expand(-1, -1, 2, -1, -1, -1)}
+        )
+        cond_one = one.diffusion._prepare_global_conditioning({OBS_STATE: state, OBS_IMAGES: images})
+        expected = two.diffusion.unet(noisy, t, global_cond=cond_two)
+        actual = one.diffusion.unet(noisy, t, global_cond=cond_one)
+    assert cond_one.shape[1] < cond_two.shape[1]
+    torch.testing.assert_close(actual, expected, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="with one, got 3"):
+        checkpoint_cameras.retarget_cameras(tmp_path / "two", tmp_path / "x", ["cam_a", "cam_d", "cam_e"])
 
 
 def test_ctrl_c_keeps_finished_runs_and_writes_the_report(monkeypatch, tmp_path, capsys):
@@ -876,8 +977,8 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
 
 def test_mini_fewshot_profile_fine_tunes_minis_own_task0_models(tmp_path):
     """``--profile mini-fewshot`` with mini's ``--out`` reuses mini's recordings and trainings (the same
-    commands, so the resumable runner skips them) and adds OmniD's camera-A fine-tuning on both tasks,
-    evaluated with camera A only; DP has no camera-A input to fine-tune (NOT_FINETUNABLE)."""
+    commands, so the resumable runner skips them) and adds OmniD's and DP's camera-A fine-tuning on both
+    tasks, evaluated with camera A only; DP starts from a copy of its checkpoint with camera A as input."""
     mini = by_name(build_plan(PROFILES["mini"], tmp_path, (TASK0,)))
     fewshot = by_name(build_plan(PROFILES["mini-fewshot"], tmp_path, (TASK0,)))
     for name, run in fewshot.items():
@@ -893,6 +994,10 @@ def test_mini_fewshot_profile_fine_tunes_minis_own_task0_models(tmp_path):
         assert flag(tuned.cmd, "policy.path") == str(tmp_path / "train" / "omnid" / TASK0 / CHECKPOINT)
         assert flag(tuned.cmd, "steps") == str(PROFILES["mini"].finetune_steps)
         assert flag(fewshot[f"eval/omnid/{task}/fewshot_a/seed1"].cmd, "env.cameras") == "[cam_a]"
-    assert not any(
-        n.startswith(("finetune/diffusion", "offline/", "record/select_apple_bcde_heldout")) for n in fewshot
-    )
+        dp = fewshot[f"finetune/diffusion/{task}"]
+        assert flag(dp.cmd, "policy.path") == str(tmp_path / "finetune" / "diffusion" / "start_cam_a")
+        assert "prepare/diffusion/cam_a" in dp.needs
+        assert flag(fewshot[f"eval/diffusion/{task}/fewshot_a/seed1"].cmd, "env.cameras") == "[cam_a]"
+    prepare = list(fewshot["prepare/diffusion/cam_a"].cmd)
+    assert prepare[prepare.index("--src") + 1] == str(tmp_path / "train" / "diffusion" / TASK0 / CHECKPOINT)
+    assert not any(n.startswith(("offline/", "record/select_apple_bcde_heldout")) for n in fewshot)

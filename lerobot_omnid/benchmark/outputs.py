@@ -27,7 +27,6 @@ from lerobot_omnid.benchmark.plan import (
     HELDOUT_SEED,
     LABELS,
     METHODS,
-    NOT_FINETUNABLE,
     OFFLINE_OUTPUT,
     SETTINGS,
     TASK0,
@@ -84,7 +83,7 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         else "- Few-shot fine-tuning: not in this profile.",
         "- Cells pool the episodes of all eval and training seeds: success rate (%) with its Wilson 95 % "
         "interval; differences in percentage points with Newcombe's hybrid score interval; p: two-sided "
-        "Fisher exact test. `—`: not run (yet); `n/a`: not applicable.",
+        "Fisher exact test. `—`: not run (yet).",
         f"- Open-loop diagnostic: {p.heldout_episodes} held-out expert episodes per {TASK0} setting "
         "(the graded bands excepted)."
         if p.heldout_episodes
@@ -105,10 +104,7 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         rows += [(LABELS[a], f, why) for a in ABLATIONS for f, why in ablation_flags(a, p) if f not in base]
     if p.fewshot:
         for m in p.methods:
-            if m in NOT_FINETUNABLE:
-                rows.append((f"{LABELS[m]} fine-tune", "(none)", NOT_FINETUNABLE[m]))
-            else:
-                rows += [(f"{LABELS[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
+            rows += [(f"{LABELS[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
     lines += [f"| {who} | `{flag}` | {why} |" for who, flag, why in rows]
     notes = {
         "act": "ACT: one observation step (the only value LeRobot's ACT supports); without pretrained "
@@ -211,7 +207,6 @@ def write_outputs(
         for r in runs
         if r.kind == "offline" and r.train_seed == first_seed
     }
-    n_a = {(m, t, FEWSHOT) for m in NOT_FINETUNABLE for t in (TASK0, TASK1)} if p.fewshot else set()
     chart = charts.bar_chart(
         cells, methods, tasks, TASK0, TASK1, BACKGROUND_OODS, LABELS, out / "benchmark.png"
     )
@@ -225,7 +220,7 @@ def write_outputs(
     lines += report.id_table(cells, methods, tasks, LABELS)
     if TASK0 in tasks:
         lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
-        lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, n_a, LABELS)
+        lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, LABELS)
         if "omnid" in methods and len(methods) > 1:
             lines += comparison_lines(records, methods, tasks)
         if any(r.control for r in records):

@@ -63,11 +63,6 @@ EVAL_SEED_STRIDE = 1000  # eval seed k runs env seeds k*1000 ... k*1000 + episod
 FEWSHOT_SEED = 100_000  # first env seed of the few-shot recordings (training sets start at 0)
 HELDOUT_SEED = 200_000  # first env seed of the held-out expert recordings of the open-loop diagnostic
 OFFLINE_OUTPUT = "offline_eval.json"  # written by omnid-offline-eval into an offline run's folder
-NOT_FINETUNABLE = {
-    "diffusion": "LeRobot's Diffusion Policy conditions its UNet on (cameras x 64 keypoint features + "
-    "state): a four-camera checkpoint has no weights for one camera's input, so it cannot be fine-tuned "
-    "on camera A alone (n/a).",
-}
 
 Flag = tuple[str, str]
 """A command-line option and why it is set."""
@@ -279,18 +274,24 @@ def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
     if method == "omnid":
         why = "camera A only: its calibration comes from the dataset, every weight from the checkpoint"
         return [("--policy.cameras=" + json_list(CAMERA_A), why)]
-    if method in ("act", "vqbet"):
+    if method in ("diffusion", "act", "vqbet"):
         why = (
             "a copy of the task-0 checkpoint whose image input is camera A instead of the training "
             "camera(s) (lerobot_omnid.benchmark.checkpoint_cameras: a --policy.input_features override "
-            "is merged with the checkpoint's, it cannot drop them); the weights do not depend on the camera"
+            "is merged with the checkpoint's, it cannot drop them); "
+        )
+        why += (
+            "DP conditions on each camera's features side by side: the copy's FiLM layers get the sum of "
+            "the four cameras' weights, so it starts as the B-E model given camera A's image in every slot"
+            if method == "diffusion"
+            else "the weights do not depend on the camera"
         )
         flags = [("--policy.path=<copy with camera A>", why)]
         if method == "vqbet":
             why = "the checkpoint's action tokeniser is kept; the GPT gets the usual warm-up and schedule"
             flags.append(("--policy.n_vqvae_training_steps=0", why))
         return flags
-    raise ValueError(f"method {method!r}: {NOT_FINETUNABLE.get(method, 'cannot be fine-tuned')}")
+    raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
 
 
 def ablation_flags(name: str, p: BenchmarkProfile) -> list[Flag]:
@@ -551,8 +552,6 @@ def plan_models(
             trained = train("train", name, TASK0, dataset, [*common("omnid"), *flags], p.steps)
             evaluate(trained, name, TASK0, ("id",), CAMERA_A if name == "omnid_cam_a" else TRAIN_CAMERAS)
     for method in p.methods:
-        if method in NOT_FINETUNABLE:
-            continue
         start = root / "train" / method / TASK0 / CHECKPOINT_SUBDIR
         start_run = f"{prefix}train/{method}/{TASK0}"
         if method != "omnid" and fewshot_tasks:  # a copy whose image input is camera A

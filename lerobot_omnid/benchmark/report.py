@@ -18,9 +18,8 @@ from lerobot_omnid.benchmark.stats import Estimate, fisher_exact, rate_differenc
 
 MISSING = "—"
 HOLD_LABEL = "(holding the measured pose)"
-NOT_APPLICABLE = "n/a"
-Cell = CellResult | str | None
-"""A table cell: a result, ``NOT_APPLICABLE``, or None where nothing was evaluated (yet)."""
+Cell = CellResult | None
+"""A table cell: a result, or None where nothing was evaluated (yet)."""
 
 
 def task_title(task: str) -> str:
@@ -79,7 +78,7 @@ def _rows(labels: Sequence[str], cells: Sequence[Sequence[Cell]]) -> list[list[s
             if isinstance(c, CellResult):
                 text.append(f"**{format_rate(c)}**" if c.rate == top else format_rate(c))
             else:
-                text.append(c or MISSING)
+                text.append(MISSING)
         rows.append(text)
     return rows
 
@@ -124,7 +123,6 @@ def generalisation_table(
     task0: str,
     task1: str,
     backgrounds: Sequence[str],
-    not_applicable: set[Key],
     labels: Mapping[str, str],
 ) -> list[str]:
     """Task 0: ID, position OOD, each background OOD, fine-tuned on camera A for task 0 and for task 1."""
@@ -135,10 +133,7 @@ def generalisation_table(
         (task0, "fewshot_a"),
         (task1, "fewshot_a"),
     ]
-    cells = [
-        [NOT_APPLICABLE if (m, t, s) in not_applicable else results.get((m, t, s)) for t, s in keys]
-        for m in methods
-    ]
+    cells = [[results.get((m, t, s)) for t, s in keys] for m in methods]
     header = ["Method", "Task 0 ID", "Position OOD", *(f"Background {b}" for b in backgrounds)]
     header += ["Fine-tune Task 0-A", "Fine-tune Task 1-A"]
     return _table(header, _rows([labels.get(m, m) for m in methods], cells))
