@@ -85,7 +85,7 @@ def main() -> None:
     train_index, test_index = (~is_test).nonzero()[:, 0], is_test.nonzero()[:, 0]
     target = (grasp - grasp[train_index].mean(dim=0)) / SCALE_M
 
-    pix_T_cam, cam_T_world = policy.camera_matrices(1, tuple(images.shape[-2:]), torch.device("cpu"))
+    pix_T_cam, cam_T_world = policy.camera_matrices(1, tuple(images.shape[-2:]))
     encoder = model.ofg if config.use_ofg else model.pool
     condition_dim = model.global_cond_dim // config.n_obs_steps - config.robot_state_feature.shape[0]
     head = nn.Sequential(nn.Linear(condition_dim, 256), nn.ReLU(), nn.Linear(256, 2))

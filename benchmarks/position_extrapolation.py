@@ -1,0 +1,197 @@
+"""Does a trained policy's image representation still locate the object outside the training square?
+
+Neither OmniD nor DP succeeds in the position bands beyond the first (docs/results.md). This separates
+the two halves of each policy: a linear probe (ridge regression) on the checkpoint's frozen image
+condition (OmniD: its plane readout; DP: its cameras' spatial-softmax features; the state is left out)
+is fitted to the grasp position (the gripper's x-y where the expert first closes it) on the training
+episodes, its ridge weight is chosen on fresh in-distribution episodes, and it is then tested on expert
+episodes of each position band. Where the probe's error stays near its in-distribution error, the
+representation extrapolates and the policy's failure lies in its action head (the same UNet for both);
+where it grows towards predicting the training mean, the representation itself stops at the square.
+
+    B=outputs/bench_mini_dp30 C=checkpoints/last/pretrained_model
+    python benchmarks/position_extrapolation.py --out outputs/position_extrapolation \\
+        --train-root $B/data/select_apple_bcde \\
+        --checkpoint omnid=$B/train/omnid/select_apple/$C \\
+        --checkpoint diffusion=$B/train/diffusion/select_apple/$C
+
+Records (once) 10 expert episodes per setting from env seed 400000, disjoint from every other seed set
+of the benchmark (docs/benchmark.md#seeds), with the checkpoints' cameras and image size. Writes
+``<out>/results.json`` and prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+from pathlib import Path
+
+import torch
+from gym_omnid.constants import POSITION_BANDS
+from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
+from lerobot.utils.constants import ACTION
+from torch import Tensor
+from tqdm import tqdm
+
+from lerobot_omnid.benchmark.commands import record_command, recorded_episodes
+from lerobot_omnid.benchmark.offline_eval import GRIPPER, POSITION, load_policy
+from lerobot_omnid.benchmark.plan import TASK0
+from lerobot_omnid.keys import IMAGE_KEY_PREFIX
+
+FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest): the object is unmoved
+PROBE_SEED = 400_000  # first env seed of the probe's recordings
+RIDGE_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)  # per sample, on standardised features
+BATCH = 32
+
+
+def probe_frames(root: Path) -> tuple[list[dict[str, Tensor]], Tensor]:
+    """The dataset items of ``FRAMES`` of every episode and the grasp x-y (N, 2) of each."""
+    dataset = LeRobotDataset(f"local/{root.name}", root=root, video_backend="pyav")
+    episodes, rows = dataset.meta.episodes, dataset.hf_dataset.with_format("torch")
+    items, grasp = [], []
+    for e in tqdm(range(dataset.meta.total_episodes), desc=f"frames {root.name}", unit="episode"):
+        start, end = int(episodes["dataset_from_index"][e]), int(episodes["dataset_to_index"][e])
+        actions = torch.stack([rows[i][ACTION] for i in range(start, end)])
+        closing = (actions[:, GRIPPER] > 0.5).nonzero()
+        if len(closing) == 0 or int(closing[0, 0]) <= max(FRAMES):
+            raise ValueError(f"{root} episode {e}: expected the gripper to close after frame {max(FRAMES)}")
+        xy = actions[int(closing[0, 0]), POSITION][:2]
+        for f in FRAMES:
+            items.append(dataset[start + f])
+            grasp.append(xy)
+    return items, torch.stack(grasp)
+
+
+def image_condition(policy, observation: dict[str, Tensor]) -> Tensor:
+    """The image part of ``policy``'s condition for one preprocessed observation step: (B, D).
+
+    OmniD: the plane readout of its cameras (``encode_images``); LeRobot's DP: its shared encoder's
+    features of each camera, concatenated in the order of ``config.image_features``.
+    """
+    if policy.config.type == "omnid":
+        images = torch.stack([observation[k] for k in policy.camera_keys], dim=1)[:, None]  # B, 1, S, 3, H, W
+        pix_T_cam, cam_T_world = policy.camera_matrices(images.shape[0], tuple(images.shape[-2:]))
+        condition, _ = policy.model.encode_images(images, pix_T_cam, cam_T_world)
+        return condition[:, 0]
+    if policy.config.type == "diffusion":
+        if policy.config.use_separate_rgb_encoder_per_camera:
+            raise ValueError("use_separate_rgb_encoder_per_camera: expected false, got true")
+        images = torch.stack([observation[k] for k in policy.config.image_features], dim=1)  # B, N, 3, H, W
+        features = policy.diffusion.rgb_encoder(images.flatten(0, 1))  # B*N, F
+        return features.view(images.shape[0], -1)
+    raise ValueError(f"policy type: expected omnid or diffusion, got {policy.config.type!r}")
+
+
+def features_of(policy, preprocessor, items: list[dict[str, Tensor]]) -> Tensor:
+    """(N, D) image conditions of dataset items, each through the checkpoint's own preprocessor."""
+    keys = [k for k in policy.config.input_features if k.startswith(IMAGE_KEY_PREFIX)]
+    keys.append("observation.state")
+    out = []
+    for i in range(0, len(items), BATCH):
+        batch = items[i : i + BATCH]
+        observation = {k: torch.stack([item[k] for item in batch]) for k in keys}
+        observation["task"] = [item["task"] for item in batch]
+        with torch.inference_mode():
+            out.append(image_condition(policy, preprocessor(observation)))
+    return torch.cat(out)
+
+
+def fit_ridge(x: Tensor, y: Tensor, weight: float) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Ridge regression of y (N, K) on standardised x (N, D); ``weight`` per sample. Returns (mean, scale,
+    coefficients (D, K), intercept (K,)), for :func:`predict`."""
+    mean, scale = x.mean(dim=0), x.std(dim=0).clamp_min(1e-6)
+    z = (x - mean) / scale
+    gram = z.T @ z + weight * len(z) * torch.eye(z.shape[1], dtype=z.dtype)
+    intercept = y.mean(dim=0)
+    coefficients = torch.linalg.solve(gram, z.T @ (y - intercept))
+    return mean, scale, coefficients, intercept
+
+
+def predict(model: tuple[Tensor, Tensor, Tensor, Tensor], x: Tensor) -> Tensor:
+    mean, scale, coefficients, intercept = model
+    return (x - mean) / scale @ coefficients + intercept
+
+
+def error_cm(predicted: Tensor, target: Tensor) -> float:
+    return float((predicted - target).norm(dim=-1).mean() * 100.0)
+
+
+def probe(
+    train: tuple[Tensor, Tensor], validation: tuple[Tensor, Tensor], tests: dict[str, tuple[Tensor, Tensor]]
+) -> dict:
+    """Fit on ``train``, choose the ridge weight on ``validation``, report every set's mean error (cm)
+    beside always predicting the training mean."""
+    x, y = (t.double() for t in train)
+    fits = {w: fit_ridge(x, y, w) for w in RIDGE_WEIGHTS}
+    chosen = min(
+        RIDGE_WEIGHTS, key=lambda w: error_cm(predict(fits[w], validation[0].double()), validation[1])
+    )
+    sets = {"validation (id)": validation, **tests}
+    return {
+        "ridge_weight": chosen,
+        "train_cm": error_cm(predict(fits[chosen], x), y),
+        "sets": {
+            name: {
+                "probe_cm": error_cm(predict(fits[chosen], fx.double()), fy.double()),
+                "mean_cm": error_cm(y.mean(dim=0).expand_as(fy), fy.double()),
+            }
+            for name, (fx, fy) in sets.items()
+        },
+    }
+
+
+def record(out: Path, layout: str, cameras: list[str], image_size: int, episodes: int) -> Path:
+    root = out / "data" / f"{TASK0}_{layout}"
+    if recorded_episodes(root) < episodes:
+        cmd = record_command(TASK0, episodes, cameras, image_size, root, PROBE_SEED, layout)
+        subprocess.run(cmd, check=True, capture_output=True)
+    return root
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--train-root", type=Path, required=True, help="the checkpoints' training dataset")
+    parser.add_argument(
+        "--checkpoint", action="append", required=True, help="NAME=pretrained_model folder (repeatable)"
+    )
+    parser.add_argument("--episodes", type=int, default=10, help="expert episodes per probe setting")
+    parser.add_argument("--device", default="cpu")
+    args = parser.parse_args(argv)
+    checkpoints = {}
+    for item in args.checkpoint:
+        name, _, path = item.partition("=")
+        if not path or not (Path(path) / "config.json").is_file():
+            parser.error(f"--checkpoint: expected NAME=<folder with config.json>, got {item!r}")
+        checkpoints[name] = Path(path)
+
+    meta = LeRobotDatasetMetadata(f"local/{args.train_root.name}", root=args.train_root)
+    image_keys = [k for k in meta.features if k.startswith(IMAGE_KEY_PREFIX)]
+    cameras = [k.removeprefix(IMAGE_KEY_PREFIX) for k in image_keys]
+    image_size = meta.features[image_keys[0]]["shape"][0]
+    roots = {"validation (id)": record(args.out, "id", cameras, image_size, args.episodes)}
+    roots |= {band: record(args.out, band, cameras, image_size, args.episodes) for band in POSITION_BANDS}
+    frames = {"train": probe_frames(args.train_root)} | {name: probe_frames(r) for name, r in roots.items()}
+
+    results = {}
+    for name, checkpoint in checkpoints.items():
+        policy, preprocessor, _ = load_policy(checkpoint, meta, args.device)
+        sets = {k: (features_of(policy, preprocessor, items), grasp) for k, (items, grasp) in frames.items()}
+        validation = sets.pop("validation (id)")
+        results[name] = {"checkpoint": str(checkpoint), **probe(sets.pop("train"), validation, sets)}
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    names = list(results)
+    print("| set | " + " | ".join(f"{n} probe (cm)" for n in names) + " | training mean (cm) |")
+    print("| --- |" + " --- |" * (len(names) + 1))
+    for s in results[names[0]]["sets"]:
+        row = [f"{results[n]['sets'][s]['probe_cm']:.2f}" for n in names]
+        print(f"| {s} | " + " | ".join(row) + f" | {results[names[0]]['sets'][s]['mean_cm']:.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

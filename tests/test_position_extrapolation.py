@@ -1,0 +1,81 @@
+"""benchmarks/position_extrapolation.py: the ridge probe extrapolates a linear representation and not a
+saturating one, and the image condition it reads from LeRobot's DP."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+import position_extrapolation as pe
+
+
+def _representation(xy: torch.Tensor, saturate: bool) -> torch.Tensor:
+    """12 features of a 2-D position: a fixed linear map (clamped to the training square if ``saturate``)."""
+    torch.manual_seed(1)
+    mixing = torch.randn(2, 12)
+    seen = xy.clamp(-0.05, 0.05) if saturate else xy
+    return seen @ mixing + 0.3
+
+
+def test_probe_extrapolates_a_linear_representation_only():
+    torch.manual_seed(0)
+    train = torch.rand(200, 2) * 0.1 - 0.05  # a 10 cm training square
+    validation = torch.rand(40, 2) * 0.1 - 0.05
+    outside = torch.rand(40, 2) * 0.05 + 0.06  # 1-6 cm beyond its corner
+    for saturate, expect_far in ((False, 0.05), (True, 3.0)):
+        result = pe.probe(
+            (_representation(train, saturate), train),
+            (_representation(validation, saturate), validation),
+            {"outside": (_representation(outside, saturate), outside)},
+        )
+        assert result["sets"]["validation (id)"]["probe_cm"] < 0.05
+        far = result["sets"]["outside"]["probe_cm"]
+        assert far < expect_far if not saturate else far > expect_far
+        assert result["sets"]["outside"]["mean_cm"] > 10.0  # the training mean is far from the corner
+        assert result["ridge_weight"] in pe.RIDGE_WEIGHTS
+
+
+def test_fit_ridge_shrinks_towards_the_mean():
+    x = torch.randn(50, 3, dtype=torch.float64)
+    y = x @ torch.tensor([[1.0], [2.0], [-1.0]], dtype=torch.float64) + 5.0
+    exact, shrunk = pe.fit_ridge(x, y, 1e-9), pe.fit_ridge(x, y, 1e3)
+    torch.testing.assert_close(pe.predict(exact, x), y)
+    assert (pe.predict(shrunk, x) - y.mean()).abs().max() < 0.1 * (y - y.mean()).abs().max()
+
+
+def test_image_condition_of_diffusion_is_each_cameras_features():
+    image = PolicyFeature(type=FeatureType.VISUAL, shape=(3, 32, 32))
+    config = DiffusionConfig(
+        input_features={
+            "observation.state": PolicyFeature(type=FeatureType.STATE, shape=(5,)),
+            "observation.images.cam_b": image,
+            "observation.images.cam_c": image,
+        },
+        output_features={"action": PolicyFeature(type=FeatureType.ACTION, shape=(4,))},
+        down_dims=(16, 32),
+        horizon=8,
+        n_action_steps=4,
+        crop_shape=None,
+        pretrained_backbone_weights=None,
+        use_group_norm=True,
+        use_separate_rgb_encoder_per_camera=False,
+        device="cpu",
+    )
+    policy = DiffusionPolicy(config).eval()
+    b, c = torch.rand(3, 3, 32, 32), torch.rand(3, 3, 32, 32)
+    with torch.no_grad():
+        both = pe.image_condition(policy, {"observation.images.cam_b": b, "observation.images.cam_c": c})
+        alone = policy.diffusion.rgb_encoder(c)
+    feature_dim = policy.diffusion.rgb_encoder.feature_dim
+    assert both.shape == (3, 2 * feature_dim)
+    torch.testing.assert_close(both[:, feature_dim:], alone)
+    policy.config.use_separate_rgb_encoder_per_camera = True
+    with pytest.raises(ValueError, match="use_separate_rgb_encoder_per_camera"):
+        pe.image_condition(policy, {})
