@@ -45,8 +45,8 @@ RIDGE_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)  # per sample, on standardi
 BATCH = 32
 
 
-def probe_frames(root: Path) -> tuple[list[dict[str, Tensor]], Tensor]:
-    """The dataset items of ``FRAMES`` of every episode and the grasp x-y (N, 2) of each."""
+def probe_frames(root: Path, frames: range = FRAMES) -> tuple[list[dict[str, Tensor]], Tensor]:
+    """The dataset items of ``frames`` of every episode and the grasp x-y (N, 2) of each."""
     dataset = LeRobotDataset(f"local/{root.name}", root=root, video_backend="pyav")
     episodes, rows = dataset.meta.episodes, dataset.hf_dataset.with_format("torch")
     items, grasp = [], []
@@ -54,10 +54,10 @@ def probe_frames(root: Path) -> tuple[list[dict[str, Tensor]], Tensor]:
         start, end = int(episodes["dataset_from_index"][e]), int(episodes["dataset_to_index"][e])
         actions = torch.stack([rows[i][ACTION] for i in range(start, end)])
         closing = (actions[:, GRIPPER] > 0.5).nonzero()
-        if len(closing) == 0 or int(closing[0, 0]) <= max(FRAMES):
-            raise ValueError(f"{root} episode {e}: expected the gripper to close after frame {max(FRAMES)}")
+        if len(closing) == 0 or int(closing[0, 0]) <= max(frames):
+            raise ValueError(f"{root} episode {e}: expected the gripper to close after frame {max(frames)}")
         xy = actions[int(closing[0, 0]), POSITION][:2]
-        for f in FRAMES:
+        for f in frames:
             items.append(dataset[start + f])
             grasp.append(xy)
     return items, torch.stack(grasp)

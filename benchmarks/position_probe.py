@@ -23,37 +23,21 @@ from pathlib import Path
 
 import torch
 from lerobot.configs.policies import PreTrainedConfig
-from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.utils.constants import ACTION
+from position_extrapolation import probe_frames
 from torch import Tensor, nn
 from tqdm import tqdm
 
-from lerobot_omnid.benchmark.offline_eval import GRIPPER, POSITION
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
-FRAMES = range(0, 21, 4)  # before any expert grasp (the first close is at frame 22 or later)
+FRAMES = range(0, 21, 4)  # before any expert grasp in distribution (the first close is at frame 22 or later)
 SCALE_M = 0.03  # targets in units of 3 cm
 
 
 def load_frames(root: Path, keys: list[str]) -> tuple[Tensor, Tensor, Tensor]:
     """Images (N, S, 3, H, W) of ``FRAMES`` of every episode, grasp x-y (N, 2) and episode index (N,)."""
-    dataset = LeRobotDataset(f"local/{root.name}", root=root, video_backend="pyav")
-    frames = dataset.hf_dataset.with_format("torch")
-    episodes = dataset.meta.episodes
-    images, grasp, episode = [], [], []
-    for e in tqdm(range(dataset.meta.total_episodes), desc="frames", unit="episode"):
-        start, end = int(episodes["dataset_from_index"][e]), int(episodes["dataset_to_index"][e])
-        actions = torch.stack([frames[i][ACTION] for i in range(start, end)])
-        closing = (actions[:, GRIPPER] > 0.5).nonzero()
-        if len(closing) == 0 or int(closing[0, 0]) <= max(FRAMES):
-            raise ValueError(f"episode {e}: expected the gripper to close after frame {max(FRAMES)}")
-        xy = actions[int(closing[0, 0]), POSITION][:2]
-        for f in FRAMES:
-            item = dataset[start + f]
-            images.append(torch.stack([item[k] for k in keys]))
-            grasp.append(xy)
-            episode.append(e)
-    return torch.stack(images), torch.stack(grasp), torch.tensor(episode)
+    items, grasp = probe_frames(root, FRAMES)
+    images = torch.stack([torch.stack([item[k] for k in keys]) for item in items])
+    return images, grasp, torch.tensor([int(item["episode_index"]) for item in items])
 
 
 def main() -> None:

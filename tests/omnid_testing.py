@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import torch
 from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
 
 from lerobot_omnid.geometry import look_at
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
@@ -74,6 +75,26 @@ def tiny_config(cams=("cam_b", "cam_c", "cam_d", "cam_e"), size: int = 64, **ove
     }
     kwargs.update(overrides)
     return OmniDConfig(**kwargs)
+
+
+def tiny_diffusion_config(cams=("cam_b", "cam_c"), size: int = 32) -> DiffusionConfig:
+    """A small LeRobot Diffusion Policy config: 5-D state, 4-D action, one ResNet-18 shared by ``cams``."""
+    image = PolicyFeature(FeatureType.VISUAL, (3, size, size))
+    return DiffusionConfig(
+        input_features={
+            "observation.state": PolicyFeature(FeatureType.STATE, (5,)),
+            **{f"observation.images.{c}": image for c in cams},
+        },
+        output_features={"action": PolicyFeature(FeatureType.ACTION, (4,))},
+        down_dims=(16, 32),
+        horizon=8,
+        n_action_steps=4,
+        crop_shape=None,
+        pretrained_backbone_weights=None,
+        use_group_norm=True,
+        use_separate_rgb_encoder_per_camera=False,
+        device="cpu",
+    )
 
 
 def random_batch(config: OmniDConfig, batch_size: int = 2, generator: torch.Generator | None = None) -> dict:

@@ -18,6 +18,7 @@ import gym_omnid.constants
 import pytest
 import torch
 from omnid_jobs import Job, job
+from omnid_testing import tiny_diffusion_config
 
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import checkpoint_cameras
@@ -623,34 +624,21 @@ def test_resumability_checks(tmp_path):
     assert is_done(train) and not is_done(record)
 
 
+TINY = "--episodes 1 --steps 2 --batch-size 2 --image-size 64 --num-workers 0 --eval-episodes 1 "
+TINY += "--episode-length 10"
+# omnid-benchmark's smallest sizes, shared by the tiny runs so that the few-shot one reuses mini's runs.
+
+
+def _omnid_benchmark(job: Job, out: Path, *options: str) -> subprocess.CompletedProcess:
+    argv = [str(Path(sys.executable).parent / "omnid-benchmark"), "--out", str(out), *TINY.split(), *options]
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    return job.run(argv, timeout=900, env=env)
+
+
 @job("benchmark", seconds=120)
 def _real_tools_tiny(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
     out = job.tmp / "bench"
-    argv = [
-        str(Path(sys.executable).parent / "omnid-benchmark"),
-        "--out",
-        str(out),
-        "--settings",
-        "id",
-        "--episodes",
-        "1",
-        "--steps",
-        "2",
-        "--batch-size",
-        "2",
-        "--image-size",
-        "64",
-        "--num-workers",
-        "0",
-        "--eval-episodes",
-        "1",
-        "--episode-length",
-        "10",
-        "--heldout-episodes",
-        "1",
-    ]
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    return out, job.run(argv, timeout=900, env=env)
+    return out, _omnid_benchmark(job, out, "--settings", "id", "--heldout-episodes", "1")
 
 
 @pytest.mark.slow
@@ -692,21 +680,8 @@ def _real_tools_fewshot_tiny(job: Job) -> tuple[Path, subprocess.CompletedProces
         return mini, first
     out = job.tmp / "bench"  # a copy: the mini test reads its own folder's results
     shutil.copytree(mini, out)
-    argv = [str(Path(sys.executable).parent / "omnid-benchmark"), "--profile", "mini-fewshot"]
-    argv += ["--out", str(out), "--episodes", "1", "--steps", "2", "--batch-size", "2", "--image-size", "64"]
-    argv += [
-        "--num-workers",
-        "0",
-        "--eval-episodes",
-        "1",
-        "--episode-length",
-        "10",
-        "--fewshot-episodes",
-        "1",
-    ]
-    argv += ["--finetune-steps", "2"]
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    return out, job.run(argv, timeout=900, env=env)
+    options = ("--profile", "mini-fewshot", "--fewshot-episodes", "1", "--finetune-steps", "2")
+    return out, _omnid_benchmark(job, out, *options)
 
 
 @pytest.mark.slow
@@ -765,30 +740,11 @@ def test_fold_camera_columns_sums_each_steps_camera_blocks():
 def test_diffusion_copy_with_one_camera_acts_as_the_camera_in_every_slot(tmp_path):
     """LeRobot's DP with a shared encoder, copied from two cameras to camera A: the copy's noise prediction
     on camera A's images equals the original's given those images from both cameras."""
-    from lerobot.configs.types import FeatureType, PolicyFeature
-    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
     from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
     from lerobot.utils.constants import OBS_IMAGES, OBS_STATE
 
-    image = PolicyFeature(type=FeatureType.VISUAL, shape=(3, 32, 32))
-    config = DiffusionConfig(
-        input_features={
-            OBS_STATE: PolicyFeature(type=FeatureType.STATE, shape=(5,)),
-            "observation.images.cam_b": image,
-            "observation.images.cam_c": image,
-        },
-        output_features={"action": PolicyFeature(type=FeatureType.ACTION, shape=(4,))},
-        down_dims=(16, 32),
-        horizon=8,
-        n_action_steps=4,
-        crop_shape=None,
-        pretrained_backbone_weights=None,
-        use_group_norm=True,
-        use_separate_rgb_encoder_per_camera=False,
-        device="cpu",
-    )
     torch.manual_seed(0)
-    DiffusionPolicy(config).save_pretrained(tmp_path / "two")
+    DiffusionPolicy(tiny_diffusion_config()).save_pretrained(tmp_path / "two")
     checkpoint_cameras.retarget_cameras(tmp_path / "two", tmp_path / "one", ["cam_a"])
     two = DiffusionPolicy.from_pretrained(tmp_path / "two").eval()
     one = DiffusionPolicy.from_pretrained(tmp_path / "one").eval()

@@ -8,9 +8,8 @@ from pathlib import Path
 
 import pytest
 import torch
-from lerobot.configs.types import FeatureType, PolicyFeature
-from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+from omnid_testing import tiny_diffusion_config
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 import position_extrapolation as pe
@@ -51,24 +50,7 @@ def test_fit_ridge_shrinks_towards_the_mean():
 
 
 def test_image_condition_of_diffusion_is_each_cameras_features():
-    image = PolicyFeature(type=FeatureType.VISUAL, shape=(3, 32, 32))
-    config = DiffusionConfig(
-        input_features={
-            "observation.state": PolicyFeature(type=FeatureType.STATE, shape=(5,)),
-            "observation.images.cam_b": image,
-            "observation.images.cam_c": image,
-        },
-        output_features={"action": PolicyFeature(type=FeatureType.ACTION, shape=(4,))},
-        down_dims=(16, 32),
-        horizon=8,
-        n_action_steps=4,
-        crop_shape=None,
-        pretrained_backbone_weights=None,
-        use_group_norm=True,
-        use_separate_rgb_encoder_per_camera=False,
-        device="cpu",
-    )
-    policy = DiffusionPolicy(config).eval()
+    policy = DiffusionPolicy(tiny_diffusion_config()).eval()
     b, c = torch.rand(3, 3, 32, 32), torch.rand(3, 3, 32, 32)
     with torch.no_grad():
         both = pe.image_condition(policy, {"observation.images.cam_b": b, "observation.images.cam_c": c})
