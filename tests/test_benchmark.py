@@ -253,6 +253,10 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
             out = Path(cmd[cmd.index("--out") + 1])
             out.parent.mkdir(parents=True, exist_ok=True)
             out.write_text("{}")
+        elif "lerobot_omnid.benchmark.checkpoint_cameras" in cmd:
+            dst = Path(cmd[cmd.index("--dst") + 1])
+            dst.mkdir(parents=True)
+            (dst / "config.json").write_text("{}")
         elif tool == "lerobot-train":
             ckpt = Path(flag(cmd, "output_dir")) / "checkpoints" / "last" / "pretrained_model"
             ckpt.mkdir(parents=True)
@@ -269,6 +273,22 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
         return 0
 
     return run
+
+
+def test_fewshot_report_has_each_fine_tuned_models_blind_control(monkeypatch, tmp_path):
+    calls: list[str] = []
+    rates = {"omnid": 60.0, "omnid/blind": 10.0, "diffusion": 20.0}
+    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, rates))
+    assert bench.main(["--profile", "mini-fewshot", "--out", str(tmp_path)]) == 0
+    report = (tmp_path / "report.md").read_text()
+    for task in (TASK0, TASK1):
+        section = report.split(f"## Few-shot on camera A, {task}: each fine-tuned model against its blind")[1]
+        rows = [line for line in section.split("\n\n")[1].splitlines() if "| fewshot_a |" in line]
+        assert [r.split(" | ")[:5] for r in rows] == [
+            ["| OmniD", "blind", "fewshot_a", "6/10 (31.3-83.2 %)", "1/10 (1.8-40.4 %)"],
+            ["| DP", "blind", "fewshot_a", "2/10 (5.7-51.0 %)", "0/10 (0.0-27.8 %)"],
+        ]
+    assert calls.count("control_calibration") == 4  # task 0's blind and scrambled, one per fine-tuned OmniD
 
 
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
@@ -688,15 +708,18 @@ def _real_tools_fewshot_tiny(job: Job) -> tuple[Path, subprocess.CompletedProces
 @pytest.mark.jobs("benchmark", "benchmark_fewshot")
 def test_real_tools_fewshot_tiny(jobs):
     """Both task-0 models fine-tuned on camera A of both tasks through the real lerobot-train, DP from its
-    one-camera copy, and evaluated with camera A; mini's trainings are reused, not rerun."""
+    one-camera copy, and evaluated with camera A beside its blind control; mini's trainings are reused."""
     out, proc = jobs.result("benchmark_fewshot")
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    cells = {
-        (c["model"], c["task"], c["setting"]) for c in json.loads((out / "results.json").read_text())["cells"]
-    }
+    results = json.loads((out / "results.json").read_text())
+    cells = {(c["model"], c["task"], c["setting"]) for c in results["cells"]}
     for model in ("omnid", "diffusion"):
         for task in (TASK0, TASK1):
             assert (model, task, "fewshot_a") in cells
+    controls = {(c["model"], c["task"], c["setting"], c["control"]) for c in results["controls"]}
+    assert {(m, t, "fewshot_a", "blind") for m in ("omnid", "diffusion") for t in (TASK0, TASK1)} <= controls
+    report = (out / "report.md").read_text()
+    assert "Few-shot on camera A, select_chemistry_tube: each fine-tuned model" in report
     copy = json.loads((out / "finetune" / "diffusion" / "start_cam_a" / "config.json").read_text())
     assert [k for k in copy["input_features"] if k.startswith("observation.images.")] == [
         "observation.images.cam_a"
@@ -954,6 +977,18 @@ def test_mini_fewshot_profile_fine_tunes_minis_own_task0_models(tmp_path):
         assert flag(dp.cmd, "policy.path") == str(tmp_path / "finetune" / "diffusion" / "start_cam_a")
         assert "prepare/diffusion/cam_a" in dp.needs
         assert flag(fewshot[f"eval/diffusion/{task}/fewshot_a/seed1"].cmd, "env.cameras") == "[cam_a]"
+        # Each fine-tuned model's blind control: OmniD's camera A turned away, computed from the fine-tuned
+        # checkpoint into its own file (not the task-0 model's); DP's camera A black.
+        calibration = fewshot[f"calibration/omnid/{task}/fewshot_a/blind"]
+        assert calibration.needs == (f"finetune/omnid/{task}",)
+        assert calibration.output == tmp_path / "controls" / "omnid" / task / "fewshot_a" / "blind.json"
+        blind = fewshot[f"eval_blind/omnid/{task}/fewshot_a/seed1"]
+        assert flag(blind.cmd, "policy.calibration_path") == str(calibration.output)
+        assert blind.control == "blind" and blind.result == ("omnid", task, "fewshot_a")
+        dp_blind = fewshot[f"eval_blind/diffusion/{task}/fewshot_a/seed1"].cmd
+        assert flag(dp_blind, "env.blackout_cameras") == "[cam_a]"
+        assert flag(dp_blind, "policy.path") == str(tmp_path / "finetune" / "diffusion" / task / CHECKPOINT)
+    assert fewshot["calibration/omnid/select_apple/blind"].output != calibration.output
     prepare = list(fewshot["prepare/diffusion/cam_a"].cmd)
     assert prepare[prepare.index("--src") + 1] == str(tmp_path / "train" / "diffusion" / TASK0 / CHECKPOINT)
     assert not any(n.startswith(("offline/", "record/select_apple_bcde_heldout")) for n in fewshot)

@@ -78,7 +78,8 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         else "- Position-shift curve: no band in this run's settings.",
         f"- Few-shot: the task-0 model fine-tuned for {p.finetune_steps} steps on {p.fewshot_episodes} "
         f"camera-A episodes (env seeds from {FEWSHOT_SEED}) of {TASK0} and of {TASK1}, evaluated with "
-        "camera A."
+        "camera A, beside its blind control (the fine-tuned checkpoint with camera A turned away in its "
+        "calibration for OmniD, black for the others)."
         if p.fewshot
         else "- Few-shot fine-tuning: not in this profile.",
         "- Cells pool the episodes of all eval and training seeds: success rate (%) with its Wilson 95 % "
@@ -145,6 +146,18 @@ def comparison_lines(
         "",
         *report.comparison_table(records, "omnid", others, cells, LABELS),
     ]
+
+
+def fewshot_control_lines(records: Sequence[results.EvalRecord], methods: Sequence[str]) -> list[str]:
+    """Each fine-tuned camera-A model against its own blind control, per task (none if not evaluated)."""
+    tasks = [t for t in (TASK0, TASK1) if any(r.control and r.key[1:] == (t, FEWSHOT) for r in records)]
+    lines = []
+    for task in tasks:
+        lines += ["", f"## Few-shot on camera A, {task}: each fine-tuned model against its blind control", ""]
+        lines += report.controls_table(
+            records, methods, task, (FEWSHOT,), {(FEWSHOT, "blind"): FEWSHOT}, LABELS, {"blind": "blind"}
+        )
+    return lines
 
 
 def curve_lines(
@@ -231,6 +244,7 @@ def write_outputs(
             lines += report.controls_table(
                 records, methods, TASK0, SETTINGS, control_of, LABELS, CONTROL_LABELS
             )
+        lines += fewshot_control_lines(records, methods)
         if any((m, TASK0, b) in cells for m in methods for b in BANDS):
             curve = charts.position_curve_chart(
                 cells, methods, TASK0, BANDS_CM, LABELS, out / "position_curve.png"

@@ -5,7 +5,8 @@ Pure: builds command lines and paths from a profile, runs nothing. The protocol 
 the paper): cameras B-E for training; every task's ID success; on task 0 position OOD, the graded position
 bands and four background OODs, and each method's controls (the same checkpoint blind; OmniD with its
 cameras' calibrations permuted); the task-0 model fine-tuned with camera-A episodes of task 0 and of task 1;
-OmniD ablations. Everything after the recordings is repeated per training seed.
+OmniD ablations; each fine-tuned model's blind control. Everything after the recordings is repeated per
+training seed.
 """
 
 from __future__ import annotations
@@ -499,24 +500,33 @@ def plan_models(
                 run = Run(name, "eval", tuple(cmd), output, (trained.name, *needs), 0, result, k, train_seed)
                 runs.append(dataclasses.replace(run, control=control))
 
-    def controls(trained: Run, method: str, cameras: Sequence[str]) -> None:
-        """Each control of ``method`` on task 0, in the control settings."""
-        settings = [s for s in p.control_settings if s in p.settings]
-        for control in method_controls(method) if settings else ():
+    def controls(
+        trained: Run,
+        method: str,
+        task: str,
+        settings: Sequence[str],
+        cameras: Sequence[str],
+        kinds: Sequence[str],
+        model: str = "",
+    ) -> None:
+        """The ``kinds`` of controls of ``trained`` (a ``method`` checkpoint) on ``task`` in ``settings``;
+        ``model`` ("" for the checkpoint trained from scratch, else e.g. ``FEWSHOT``) names its files."""
+        for control in kinds if settings else ():
             needs: tuple[str, ...] = ()
-            calibration_file = root / "controls" / method / TASK0 / f"{control}.json"
+            where = f"{model}/{control}" if model else control
+            calibration_file = root / "controls" / method / task / f"{where}.json"
             if method == "omnid":
                 cmd = control_calibration_command(
                     trained.output / CHECKPOINT_SUBDIR, control, calibration_file
                 )
-                name = f"{prefix}calibration/{method}/{TASK0}/{control}"
+                name = f"{prefix}calibration/{method}/{task}/{where}"
                 run = Run(
                     name, "calibration", tuple(cmd), calibration_file, (trained.name,), train_seed=train_seed
                 )
                 runs.append(run)
                 needs = (run.name,)
             options = [f for f, _ in control_flags(method, control, cameras, calibration_file)]
-            evaluate(trained, method, TASK0, settings, cameras, control, options, needs)
+            evaluate(trained, method, task, settings, cameras, control, options, needs)
 
     def offline(trained: Run, model: str, task: str, settings: Sequence[str]) -> None:
         """Open-loop action error of ``trained`` on the held-out expert episodes of each setting."""
@@ -543,7 +553,8 @@ def plan_models(
             cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
             evaluate(trained, method, task, p.settings if task == TASK0 else ("id",), cameras)
             if task == TASK0:
-                controls(trained, method, cameras)
+                settings = [s for s in p.control_settings if s in p.settings]
+                controls(trained, method, TASK0, settings, cameras, method_controls(method))
                 offline(trained, method, task, heldout_settings(p, tasks))
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
@@ -567,4 +578,6 @@ def plan_models(
             dataset = f"{task}_a_fewshot"
             tuned = train("finetune", method, task, dataset, flags, p.finetune_steps, needs=(start_run,))
             evaluate(tuned, method, task, (FEWSHOT,), CAMERA_A)
+            # One camera: blind only (no other camera's calibration to permute).
+            controls(tuned, method, task, (FEWSHOT,), CAMERA_A, ("blind",), model=FEWSHOT)
     return runs
