@@ -288,7 +288,7 @@ def test_fewshot_report_has_each_fine_tuned_models_blind_control(monkeypatch, tm
             ["| OmniD", "blind", "fewshot_a", "6/10 (31.3-83.2 %)", "1/10 (1.8-40.4 %)"],
             ["| DP", "blind", "fewshot_a", "2/10 (5.7-51.0 %)", "0/10 (0.0-27.8 %)"],
         ]
-    assert calls.count("control_calibration") == 4  # task 0's blind and scrambled, one per fine-tuned OmniD
+    assert calls.count("control_calibration") == 5  # task 0's three, one per fine-tuned OmniD
 
 
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
@@ -299,9 +299,9 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     out = tmp_path / "bench"
     assert bench.main(["--out", str(out)]) == 0
     assert calls.count("omnid-record") == 7 and calls.count("lerobot-train") == 2
-    # 10 task-0 settings per method; controls in ID: OmniD blind and scrambled (each with its calibration
-    # file), DP blind
-    assert calls.count("lerobot-eval") == 23 and calls.count("control_calibration") == 2
+    # 10 task-0 settings per method; controls in ID: OmniD blind, scrambled and perturbed (each with its
+    # calibration file), DP blind
+    assert calls.count("lerobot-eval") == 24 and calls.count("control_calibration") == 3
     report = (out / "report.md").read_text()
     sixty, twenty = "60.0 (31.3-83.2)", "20.0 (5.7-51.0)"  # 6/10 and 2/10 with Wilson 95 % intervals
     assert f"| OmniD | **{sixty}** | {sixty} |" in report  # ID table: best per task in bold, then the average
@@ -316,6 +316,7 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     assert "| OmniD | blind | id | 6/10 (31.3-83.2 %) | 0/10 (0.0-27.8 %) | +60.0 (" in report
     assert "| 0.011 |" in report
     assert "| OmniD | scrambled geometry | id | 6/10 (31.3-83.2 %) | 1/10 (" in report
+    assert "| OmniD | calibration off by 2 cm and 2 deg | id | 6/10 (31.3-83.2 %) | 0/10 (" in report
     assert "| DP | blind | ood3 (control of id) | 2/10 (5.7-51.0 %) | 0/10 (0.0-27.8 %) |" in report
     assert "| OmniD | blind | position_ood" not in report
     # The position-shift curve: every band, its area, the chart.
@@ -331,12 +332,13 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     assert {(c["model"], c["control"]) for c in summary["controls"]} == {
         ("omnid", "blind"),
         ("omnid", "scrambled"),
+        ("omnid", "perturbed"),
         ("diffusion", "blind"),
     }
     assert "| OmniD | **4.0 / 0.25** | **4.0 / 0.25** |" in report  # open-loop error: lowest in bold
     assert "| DP | 8.0 / 0.25 |" in report
     assert calls.count("omnid-offline-eval") == 12
-    assert "46 runs: 46 ran" in capsys.readouterr().out
+    assert "48 runs: 48 ran" in capsys.readouterr().out
     # Each finished evaluation's summary, and the folder's.
     run_summary = json.loads(
         (out / "eval_blind" / "omnid" / TASK0 / "id" / "seed1" / "run_summary.json").read_text()
@@ -349,7 +351,7 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     )
     folder = json.loads((out / "summary.json").read_text())
     assert folder["commit"] == "abc123" and folder["command"] == ["omnid-benchmark", "--out", str(out)]
-    assert len(folder["evaluations"]) == 23
+    assert len(folder["evaluations"]) == 24
 
     # Resume: nothing finished is redone; an eval whose result is gone, an incomplete training run (its folder
     # without a checkpoint) and a dataset with too few episodes are.
@@ -381,9 +383,9 @@ def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
     assert bench.main(["--out", str(tmp_path), "--settings", "id,ood1"]) == 1
     assert calls == ["omnid-record"] * 3 + ["lerobot-train", "lerobot-train"]
     out = capsys.readouterr().out
-    # blocked: 2 x 2 evaluations, 2 x 2 open-loop runs, OmniD's 2 calibration files and 2 control
+    # blocked: 2 x 2 evaluations, 2 x 2 open-loop runs, OmniD's 3 calibration files and 3 control
     # evaluations, DP's blind evaluation
-    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 13 blocked" in out
+    assert "train/omnid/select_apple: FAILED" in out and "2 failed, 15 blocked" in out
     assert (tmp_path / "report.md").is_file()
 
 
@@ -675,8 +677,10 @@ def test_real_tools_end_to_end_tiny(jobs):
     # The controls ran through the real tools: OmniD with the calibration files written from its checkpoint
     # (lerobot-eval --policy.calibration_path), DP with black images (--env.blackout_cameras).
     controls = {(c["model"], c["control"]): c["episodes"] for c in summary["controls"]}
-    assert controls == {("omnid", "blind"): 1, ("omnid", "scrambled"): 1, ("diffusion", "blind"): 1}
-    for control in ("blind", "scrambled"):
+    assert controls == {("omnid", c): 1 for c in ("blind", "scrambled", "perturbed")} | {
+        ("diffusion", "blind"): 1
+    }
+    for control in ("blind", "scrambled", "perturbed"):
         calibrations = load_calibration_file(out / "controls" / "omnid" / TASK0 / f"{control}.json")
         assert sorted(calibrations) == [f"observation.images.cam_{c}" for c in "bcde"]
     run_summary = json.loads(
@@ -805,7 +809,7 @@ def test_ctrl_c_keeps_finished_runs_and_writes_the_report(monkeypatch, tmp_path,
     assert bench.main(["--out", str(tmp_path)]) == 0
     assert (
         calls.count("lerobot-train") == 1
-        and calls.count("lerobot-eval") == 22
+        and calls.count("lerobot-eval") == 23
         and "omnid-record" not in calls
     )
 
@@ -907,13 +911,13 @@ def test_report_only_aggregates_folders_from_two_machines(monkeypatch, tmp_path,
     assert bench.main(["--report-only", "--out", str(a), *small, "--also", str(copied), str(a)]) == 0
     assert calls == []
     report = (a / "report.md").read_text()
-    assert "Merged with 7 evaluations of:" in report  # 2 x 2 settings + 3 controls: B's, not A's again
+    assert "Merged with 8 evaluations of:" in report  # 2 x 2 settings + 4 controls: B's, not A's again
     # OmniD 12/20 vs DP 4/20 pooled over the two seeds, and each seed's 6/10 vs 2/10 (p = 0.17)
     assert "| select_apple | id | DP | 12/20 (38.7-78.1 %) | 4/20 (8.1-41.6 %) |" in report
     assert "| 1000: 0.17, 1001: 0.17 |" in report
     assert f"`{copied}`" in report and "| OmniD | select_apple | id |  | 1001 | 1 | 6/10" in report
     assert json.loads((a / "results.json").read_text())["train_seeds"] == [1000, 1001]
-    assert len(json.loads((a / "summary.json").read_text())["evaluations"]) == 7  # only A's own
+    assert len(json.loads((a / "summary.json").read_text())["evaluations"]) == 8  # only A's own
     # A result that contradicts another of the same evaluation, and results of another experiment
     data = json.loads(copied.read_text())
     data["evaluations"][0]["train_seed"] = TRAIN_SEED

@@ -18,6 +18,7 @@ from lerobot_omnid.benchmark.control_calibration import (
     permuted,
     turned_away,
 )
+from lerobot_omnid.benchmark.plan import PERTURBED_LEVEL
 from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig
@@ -81,6 +82,31 @@ def test_scrambled_leaves_no_camera_in_place(benchmark_cameras):
         permuted({keys[0]: benchmark_cameras[keys[0]]})
     with pytest.raises(ValueError, match="control: expected one of"):
         control_calibrations(config, "shuffled")
+
+
+def test_perturbed_moves_and_turns_every_camera_by_the_level(benchmark_cameras):
+    config = {"camera_calibration": {key: c.to_dict() for key, c in benchmark_cameras.items()}}
+    perturbed = control_calibrations(config, "perturbed")
+    assert list(perturbed) == list(benchmark_cameras)
+    for key, calib in perturbed.items():
+        true, moved = (
+            torch.tensor(c.T_cam_world, dtype=torch.float64) for c in (benchmark_cameras[key], calib)
+        )
+        centre = [-m[:3, :3].T @ m[:3, 3] for m in (true, moved)]
+        assert (centre[1] - centre[0]).norm() * 100 == pytest.approx(PERTURBED_LEVEL, abs=1e-3)
+        cos = ((moved[:3, :3] @ true[:3, :3].T).trace() - 1) / 2
+        assert torch.rad2deg(torch.arccos(cos.clamp(-1, 1))) == pytest.approx(PERTURBED_LEVEL, abs=1e-2)
+        assert calib.K == benchmark_cameras[key].K
+    assert control_calibrations(config, "perturbed") == perturbed  # a fixed draw
+    with pytest.raises(ValueError, match="expected the benchmark's cameras"):
+        control_calibrations(
+            {
+                "camera_calibration": {
+                    "observation.images.top": config["camera_calibration"]["observation.images.cam_b"]
+                }
+            },
+            "perturbed",
+        )
 
 
 def _actions(policy: OmniDPolicy, images: dict[str, torch.Tensor], state: torch.Tensor) -> torch.Tensor:

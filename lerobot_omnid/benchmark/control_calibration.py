@@ -7,7 +7,10 @@ calibrations with a file's (read once when the config is made), so one trained O
   pointing from the volume's centre through the camera, every corner of the volume behind it): no anchor
   projects into any image, the images contribute nothing and only the state can drive the policy;
 - ``scrambled``: the cameras' calibrations permuted (each camera gets the next one's, a cycle that leaves
-  none in place): the images are real but the geometry that lifts them into the volume is wrong.
+  none in place): the images are real but the geometry that lifts them into the volume is wrong;
+- ``perturbed``: every camera moved by ``PERTURBED_LEVEL`` cm and turned by as many degrees, in random
+  directions drawn from a fixed seed (``omnid-robustness``'s first draw at that level): a rig measured
+  with an error.
 
 Written from the checkpoint's own ``config.json`` (its ``camera_calibration`` and ``volume_bounds``)::
 
@@ -26,11 +29,13 @@ from pathlib import Path
 
 import torch
 
+from lerobot_omnid.benchmark.plan import CONTROLS, PERTURBED_LEVEL
+from lerobot_omnid.benchmark.robustness_plan import camera_offsets, perturbed_calibrations
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.geometry import apply_transform, camera_centers_world, look_at
+from lerobot_omnid.keys import IMAGE_KEY_PREFIX
 
-CONTROLS = ("blind", "scrambled")
 CONFIG = "config.json"
 NEAR_VERTICAL = (
     0.99  # |cos| of the angle between the turned camera's axis and world z above which world x is up
@@ -76,6 +81,17 @@ def permuted(calibrations: Mapping[str, CameraCalibration]) -> dict[str, CameraC
     return {key: calibrations[keys[(i + 1) % len(keys)]] for i, key in enumerate(keys)}
 
 
+def perturbed(calibrations: Mapping[str, CameraCalibration]) -> dict[str, CameraCalibration]:
+    """Each camera (keyed by image feature key) moved and turned by ``PERTURBED_LEVEL`` in its calibration."""
+    offsets = camera_offsets(PERTURBED_LEVEL, draw=1, seed=0)
+    names = {key: key.removeprefix(IMAGE_KEY_PREFIX) for key in calibrations}
+    unknown = [key for key, name in names.items() if name not in offsets]
+    if unknown:
+        raise ValueError(f"cameras: expected the benchmark's cameras {list(offsets)}, got {unknown}")
+    moved = perturbed_calibrations({names[k]: c for k, c in calibrations.items()}, offsets)
+    return {key: moved[name] for key, name in names.items()}
+
+
 def control_calibrations(config: Mapping, control: str) -> dict[str, CameraCalibration]:
     """The calibrations of ``control`` for an OmniD checkpoint's ``config.json`` content."""
     if control not in CONTROLS:
@@ -88,6 +104,8 @@ def control_calibrations(config: Mapping, control: str) -> dict[str, CameraCalib
     calibrations = {key: CameraCalibration.from_dict(value, camera=key) for key, value in raw.items()}
     if control == "scrambled":
         return permuted(calibrations)
+    if control == "perturbed":
+        return perturbed(calibrations)
     return {key: turned_away(calib, config["volume_bounds"], key) for key, calib in calibrations.items()}
 
 

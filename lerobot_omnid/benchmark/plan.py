@@ -51,9 +51,16 @@ TASK0, TASK1 = "select_apple", "select_chemistry_tube"  # the paper's task 0 and
 BACKGROUND_OODS = ("ood1", "ood2", "ood3", "ood4")
 BANDS = tuple(POSITION_BANDS)  # position_band_1 .. _4: the position-shift curve's settings
 SETTINGS = ("id", "position_ood", *BACKGROUND_OODS, *BANDS)
-CONTROLS = ("blind", "scrambled")
+CONTROLS = ("blind", "scrambled", "perturbed")
 """Evaluations of a trained checkpoint that test what drives it (see :func:`control_flags`)."""
-CONTROL_LABELS = {"blind": "blind", "scrambled": "scrambled geometry"}
+PERTURBED_LEVEL = 2.0
+"""cm and degrees by which the ``perturbed`` control moves and turns every camera (a carelessly measured
+rig; ``omnid-robustness`` measures the whole curve, and this is its first draw at this level)."""
+CONTROL_LABELS = {
+    "blind": "blind",
+    "scrambled": "scrambled geometry",
+    "perturbed": f"calibration off by {PERTURBED_LEVEL:g} cm and {PERTURBED_LEVEL:g} deg",
+}
 ABLATIONS = ("omnid_resnet101", "omnid_no_ofg", "omnid_cam_a")
 FEWSHOT = "fewshot_a"
 """Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
@@ -331,7 +338,7 @@ def setting_env(setting: str) -> tuple[str, str]:
 
 
 def method_controls(method: str) -> tuple[str, ...]:
-    """The controls of ``method``: every method's blind one, and OmniD's scrambled geometry."""
+    """The controls of ``method``: every method's blind one, and OmniD's scrambled and perturbed geometry."""
     return CONTROLS if method == "omnid" else ("blind",)
 
 
@@ -339,7 +346,8 @@ def control_flags(
     method: str, control: str, cameras: Sequence[str], calibration_file: Path | str
 ) -> list[Flag]:
     """Options that turn an evaluation of ``method``'s checkpoint into its ``control``: only the state can
-    drive it (blind), or its images are lifted with the wrong geometry (scrambled, OmniD only)."""
+    drive it (blind), or its images are lifted with the wrong geometry (scrambled) or a slightly wrong one
+    (perturbed; both OmniD only)."""
     if control not in method_controls(method):
         raise ValueError(
             f"control of {method}: expected one of {list(method_controls(method))}, got {control!r}"
@@ -350,6 +358,9 @@ def control_flags(
             "benchmark.control_calibration): no anchor is visible, the images contribute nothing",
             "scrambled": "the cameras' calibrations permuted (each gets the next camera's, none keeps "
             "its own): real images lifted into the volume with the wrong geometry",
+            "perturbed": f"every camera moved by {PERTURBED_LEVEL:g} cm and turned by {PERTURBED_LEVEL:g} "
+            "degrees in its calibration (random directions, fixed seed): how much a measured rig's error "
+            "costs",
         }[control]
         return [(f"--policy.calibration_path={calibration_file}", why)]
     why = "black images (every pixel zero) from every camera: only the state can drive the policy"
