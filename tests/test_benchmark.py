@@ -687,7 +687,7 @@ def test_real_tools_end_to_end_tiny(jobs):
         (out / "eval_blind" / "diffusion" / TASK0 / "id" / "seed1" / "run_summary.json").read_text()
     )
     assert "--env.blackout_cameras=[cam_b,cam_c,cam_d,cam_e]" in run_summary["command"]
-    assert len(json.loads((out / "summary.json").read_text())["evaluations"]) == 5
+    assert len(json.loads((out / "summary.json").read_text())["evaluations"]) == 6
     report = (out / "report.md").read_text()
     assert "| Method | Select Apple | Average |" in report
     for method in ("omnid", "diffusion"):  # the open-loop diagnostic ran with the real checkpoints
