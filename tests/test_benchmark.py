@@ -953,6 +953,9 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
     cmd = runs["eval/omnid/select_apple/ood2/seed1"].cmd
     assert flag(cmd, "eval.n_episodes") == "30" and flag(cmd, "eval.batch_size") == "10"
     assert flag(runs["train/omnid/select_apple"].cmd, "policy.device") == "cuda"
+    assert flag(runs["train/omnid/select_apple"].cmd, "policy.fuse_last_step_only") == "true"
+    mini = by_name(build_plan(PROFILES["mini"], tmp_path / "m", (TASK0,)))
+    assert flag(mini["train/omnid/select_apple"].cmd, "policy.fuse_last_step_only") is None
     assert bench.main(["--profile", "gpu8", "--device", "cpu", "--out", str(tmp_path / "b")]) == 0
     assert calls.count("lerobot-train") == 2 and calls.count("omnid-record") == 1
     assert "position_band_2" in (tmp_path / "b" / "report.md").read_text()
