@@ -43,6 +43,7 @@ FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest)
 PROBE_SEED = 400_000  # first env seed of the probe's recordings
 RIDGE_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)  # per sample, on standardised features
 BATCH = 32
+VALIDATION = "validation (id)"  # the fresh in-distribution set that chooses the ridge weight
 
 
 def probe_frames(root: Path, frames: range = FRAMES) -> tuple[list[dict[str, Tensor]], Tensor]:
@@ -127,7 +128,7 @@ def probe(
     chosen = min(
         RIDGE_WEIGHTS, key=lambda w: error_cm(predict(fits[w], validation[0].double()), validation[1])
     )
-    sets = {"validation (id)": validation, **tests}
+    sets = {VALIDATION: validation, **tests}
     return {
         "ridge_weight": chosen,
         "train_cm": error_cm(predict(fits[chosen], x), y),
@@ -172,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     image_keys = [k for k in meta.features if k.startswith(IMAGE_KEY_PREFIX)]
     cameras = [k.removeprefix(IMAGE_KEY_PREFIX) for k in image_keys]
     image_size = meta.features[image_keys[0]]["shape"][0]
-    roots = {"validation (id)": record(args.out, "id", cameras, image_size, args.episodes)}
+    roots = {VALIDATION: record(args.out, "id", cameras, image_size, args.episodes)}
     roots |= {band: record(args.out, band, cameras, image_size, args.episodes) for band in POSITION_BANDS}
     frames = {"train": probe_frames(args.train_root)} | {name: probe_frames(r) for name, r in roots.items()}
 
@@ -180,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, checkpoint in checkpoints.items():
         policy, preprocessor, _ = load_policy(checkpoint, meta, args.device)
         sets = {k: (features_of(policy, preprocessor, items), grasp) for k, (items, grasp) in frames.items()}
-        validation = sets.pop("validation (id)")
+        validation = sets.pop(VALIDATION)
         results[name] = {"checkpoint": str(checkpoint), **probe(sets.pop("train"), validation, sets)}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")

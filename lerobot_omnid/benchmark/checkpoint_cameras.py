@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 from safetensors import safe_open
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX, image_key
 
@@ -113,9 +113,8 @@ def retarget_cameras(src: Path, dst: Path, cameras: list[str]) -> Path:
                 f"cameras: a diffusion checkpoint with {len(images)} cameras can be copied with its own "
                 f"number of cameras or with one, got {len(cameras)}"
             )
-        weights = load_file(src / WEIGHTS)
-        with safe_open(src / WEIGHTS, "pt") as f:
-            metadata = f.metadata()
+        with safe_open(src / WEIGHTS, "pt") as f:  # one read: the tensors and the file's metadata
+            weights, metadata = {k: f.get_tensor(k) for k in f.keys()}, f.metadata()  # noqa: SIM118 (not iterable)
         fold_diffusion_weights(config, weights, len(images))
     others = {key: ft for key, ft in features.items() if not key.startswith(IMAGE_KEY_PREFIX)}
     config["input_features"] = {**others, **{image_key(cam): dict(images[0]) for cam in cameras}}
