@@ -9,11 +9,18 @@ episodes of each position band. Where the probe's error stays near its in-distri
 representation extrapolates and the policy's failure lies in its action head (the same UNet for both);
 where it grows towards predicting the training mean, the representation itself stops at the square.
 
+With ``--tables``, the same probe also reads expert episodes on unseen table textures. They come from the
+same env seeds as the in-distribution validation set (the table changes only a texture, not the layout),
+so each frame has a twin on the training table, and the script reports how far the table moves the
+representation: the mean distance between twins relative to the spread of the validation frames
+(:func:`table_shift`, in the training standardisation). A table that moves it by about its spread
+scrambles the object's position as much as a new layout would.
+
     B=outputs/bench_mini_dp30 C=checkpoints/last/pretrained_model
     python benchmarks/position_extrapolation.py --out outputs/position_extrapolation \\
         --train-root $B/data/select_apple_bcde \\
         --checkpoint omnid=$B/train/omnid/select_apple/$C \\
-        --checkpoint diffusion=$B/train/diffusion/select_apple/$C
+        --checkpoint diffusion=$B/train/diffusion/select_apple/$C [--tables ood1,ood2,ood3,ood4]
 
 Records (once) 10 expert episodes per setting from env seed 400000, disjoint from every other seed set
 of the benchmark (docs/benchmark.md#seeds), with the checkpoints' cameras and image size. Writes
@@ -28,7 +35,7 @@ import subprocess
 from pathlib import Path
 
 import torch
-from gym_omnid.constants import POSITION_BANDS
+from gym_omnid.constants import BACKGROUNDS, POSITION_BANDS
 from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 from lerobot.utils.constants import ACTION
 from torch import Tensor
@@ -142,10 +149,23 @@ def probe(
     }
 
 
-def record(out: Path, layout: str, cameras: list[str], image_size: int, episodes: int) -> Path:
-    root = out / "data" / f"{TASK0}_{layout}"
+def table_shift(train: Tensor, reference: Tensor, moved: Tensor) -> float:
+    """How far a new table moves a representation: the mean distance between the twins of ``reference``
+    and ``moved`` (N, D, the same frames on two tables), divided by the mean distance of ``reference``'s
+    frames from their own mean, both in ``train``'s per-feature standardisation. 0: the table changes
+    nothing; 1: as far as the object's position moves it."""
+    mean, scale = train.double().mean(dim=0), train.double().std(dim=0).clamp_min(1e-6)
+    z_reference, z_moved = ((t.double() - mean) / scale for t in (reference, moved))
+    spread = (z_reference - z_reference.mean(dim=0)).norm(dim=-1).mean()
+    return float((z_moved - z_reference).norm(dim=-1).mean() / spread)
+
+
+def record(
+    out: Path, layout: str, cameras: list[str], image_size: int, episodes: int, background: str = "id"
+) -> Path:
+    root = out / "data" / f"{TASK0}_{layout if background == 'id' else background}"
     if recorded_episodes(root) < episodes:
-        cmd = record_command(TASK0, episodes, cameras, image_size, root, PROBE_SEED, layout)
+        cmd = record_command(TASK0, episodes, cameras, image_size, root, PROBE_SEED, layout, background)
         subprocess.run(cmd, check=True, capture_output=True)
     return root
 
@@ -160,8 +180,15 @@ def main(argv: list[str] | None = None) -> int:
         "--checkpoint", action="append", required=True, help="NAME=pretrained_model folder (repeatable)"
     )
     parser.add_argument("--episodes", type=int, default=10, help="expert episodes per probe setting")
+    parser.add_argument(
+        "--tables", default="", help="unseen table textures to probe too, comma-separated (e.g. ood1,ood2)"
+    )
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
+    tables = [t for t in args.tables.split(",") if t]
+    for table in tables:
+        if table not in BACKGROUNDS[1:]:
+            parser.error(f"--tables: expected names from {BACKGROUNDS[1:]}, got {table!r}")
     checkpoints = {}
     for item in args.checkpoint:
         name, _, path = item.partition("=")
@@ -175,14 +202,17 @@ def main(argv: list[str] | None = None) -> int:
     image_size = meta.features[image_keys[0]]["shape"][0]
     roots = {VALIDATION: record(args.out, "id", cameras, image_size, args.episodes)}
     roots |= {band: record(args.out, band, cameras, image_size, args.episodes) for band in POSITION_BANDS}
+    roots |= {t: record(args.out, "id", cameras, image_size, args.episodes, background=t) for t in tables}
     frames = {"train": probe_frames(args.train_root)} | {name: probe_frames(r) for name, r in roots.items()}
 
     results = {}
     for name, checkpoint in checkpoints.items():
         policy, preprocessor, _ = load_policy(checkpoint, meta, args.device)
         sets = {k: (features_of(policy, preprocessor, items), grasp) for k, (items, grasp) in frames.items()}
-        validation = sets.pop(VALIDATION)
-        results[name] = {"checkpoint": str(checkpoint), **probe(sets.pop("train"), validation, sets)}
+        validation, train = sets.pop(VALIDATION), sets.pop("train")
+        results[name] = {"checkpoint": str(checkpoint), **probe(train, validation, sets)}
+        for t in tables:
+            results[name]["sets"][t]["table_shift"] = table_shift(train[0], validation[0], sets[t][0])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     names = list(results)
@@ -191,6 +221,12 @@ def main(argv: list[str] | None = None) -> int:
     for s in results[names[0]]["sets"]:
         row = [f"{results[n]['sets'][s]['probe_cm']:.2f}" for n in names]
         print(f"| {s} | " + " | ".join(row) + f" | {results[names[0]]['sets'][s]['mean_cm']:.2f} |")
+    if tables:
+        print("\n| table | " + " | ".join(f"{n} table shift" for n in names) + " |")
+        print("| --- |" + " --- |" * len(names))
+        for t in tables:
+            shifts = [f"{results[n]['sets'][t]['table_shift']:.2f}" for n in names]
+            print(f"| {t} | " + " | ".join(shifts) + " |")
     return 0
 
 

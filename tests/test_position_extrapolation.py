@@ -61,3 +61,18 @@ def test_image_condition_of_diffusion_is_each_cameras_features():
     policy.config.use_separate_rgb_encoder_per_camera = True
     with pytest.raises(ValueError, match="use_separate_rgb_encoder_per_camera"):
         pe.image_condition(policy, {})
+
+
+def test_table_shift_is_zero_for_twins_and_near_root_two_for_strangers():
+    torch.manual_seed(0)
+    train, reference, strangers = torch.randn(400, 6), torch.randn(300, 6), torch.randn(300, 6)
+    assert pe.table_shift(train, reference, reference) == 0.0
+    # unrelated frames: E|a - b| / E|a - mean| = sqrt(2) for independent Gaussians
+    assert 1.3 < pe.table_shift(train, reference, strangers) < 1.5
+    nudged = reference + 0.1 * torch.randn(300, 6)
+    assert 0.05 < pe.table_shift(train, reference, nudged) < 0.15
+    # units do not matter: each feature is standardised by the training frames
+    units = torch.tensor([1.0, 10.0, 0.1, 3.0, 1e3, 1e-2])
+    assert pe.table_shift(train * units, reference * units, nudged * units) == pytest.approx(
+        pe.table_shift(train, reference, nudged)
+    )
