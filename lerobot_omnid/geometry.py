@@ -152,6 +152,29 @@ def pixels_to_feature_grid(uv_pix: Tensor, feature_hw: tuple[int, int], stride: 
     return (cells + 0.5) * uv_pix.new_tensor([2.0 / w, 2.0 / h]) - 1.0
 
 
+def clamp_to_feature_cells(
+    uv_pix: Tensor, image_hw: tuple[int, int], feature_hw: tuple[int, int], stride: int, offset: float
+) -> Tensor:
+    """Pixels inside the image moved onto the span of the feature cells' centres, per axis.
+
+    The last cell of a map of ``ceil(W / stride)`` cells is centred at ``stride * (w - 1) + offset``, up to
+    a stride short of the image's far edge: a point of the image beyond it would be sampled mostly from the
+    feature map's zero padding (a fade to nothing at the right and bottom edges) while it counts as visible
+    with full attention weight. Clamped, it reads the nearest cell, which covers it. Coordinates outside
+    the image are left as they are (zero padding: nothing is seen there).
+
+    Args:
+        uv_pix: (..., 2) pixel coordinates (u, v) in the image of ``image_hw``.
+        feature_hw: (h, w) cells of the feature map computed from that image.
+        stride, offset: where the cells are, in pixels (cell ``j`` centred on ``stride * j + offset``).
+    """
+    (h, w), (fh, fw) = image_hw, feature_hw
+    first = uv_pix.new_tensor([offset, offset])
+    last = uv_pix.new_tensor([stride * (fw - 1) + offset, stride * (fh - 1) + offset])
+    inside = (uv_pix >= -0.5) & (uv_pix <= uv_pix.new_tensor([w - 0.5, h - 0.5]))
+    return torch.where(inside, torch.minimum(torch.maximum(uv_pix, first), last), uv_pix)
+
+
 def project_to_grid(
     pix_T_cam: Tensor, cam_T_world: Tensor, xyz_world: Tensor, image_hw: tuple[int, int]
 ) -> tuple[Tensor, Tensor]:

@@ -16,10 +16,15 @@ from omnid_testing import STATE_DIM, tiny_config
 from torch import nn
 
 from lerobot_omnid.calibration.schema import CameraCalibration
-from lerobot_omnid.geometry import FeatureVolume, apply_transform, look_at, project_to_pixels
+from lerobot_omnid.geometry import FeatureVolume, apply_transform, look_at, pixels_to_grid, project_to_pixels
 from lerobot_omnid.policy.backbone import feature_cell_centres
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
-from lerobot_omnid.policy.omni_feature_generator import CameraCrossAttention, camera_geometry
+from lerobot_omnid.policy.omni_feature_generator import (
+    CAMERA_GEOMETRY_DIM,
+    CameraCrossAttention,
+    CameraGeometry,
+    camera_geometry,
+)
 
 BLOB_WORLD = (0.47, 0.03, 0.11)  # metres, robot base frame
 CAMERA_EYES = ((1.25, 0.1, 0.7), (0.45, 0.85, 0.55), (0.4, -0.8, 0.75), (-0.3, 0.05, 0.9))
@@ -93,8 +98,12 @@ def uniform_cross_attention(volume: FeatureVolume, stride: int, offset: float) -
     return attention
 
 
-def plane_peak(images: torch.Tensor, pix_T_cam, cam_T_world, image_hw, volume, stride) -> tuple[int, int]:
-    """images (S, 3, H, W) -> the (row, col) plane cell where the uniform OFG's plane is largest."""
+def plane_peak(
+    images: torch.Tensor, pix_T_cam, cam_T_world, image_hw, volume, stride, seen_by_all: bool = False
+) -> tuple[int, int]:
+    """images (S, 3, H, W) -> the (row, col) plane cell where the uniform OFG's plane is largest; among the
+    cells every camera sees with ``seen_by_all`` (a cell seen by one camera is as bright as any cell that
+    camera's ray through the blob crosses)."""
     stride_, offset = feature_cell_centres([GaussianFilter(stride).conv])
     assert (stride_, offset) == (stride, 0.0)
     features = GaussianFilter(stride)(images)[None]  # 1, S, 1, h, w
@@ -102,7 +111,11 @@ def plane_peak(images: torch.Tensor, pix_T_cam, cam_T_world, image_hw, volume, s
     attention = uniform_cross_attention(volume, stride, offset)
     with torch.no_grad():
         plane, _, _ = attention(torch.zeros(1, volume.num_queries, 1), features, geometry)
-    index = int(plane[0, :, 0].argmax())
+    values = plane[0, :, 0]
+    if seen_by_all:
+        every_camera = geometry.anchor_visible[0].any(dim=-1).all(dim=0)  # Q
+        values = values.masked_fill(~every_camera, -torch.inf)
+    index = int(values.argmax())
     return divmod(index, volume.plane_shape[1])
 
 
@@ -237,3 +250,85 @@ def test_feature_cell_centres_of_a_strided_chain():
     layers = [nn.Conv2d(3, 3, 7, stride=2, padding=3), nn.MaxPool2d(3, 2, 1), nn.Conv2d(3, 3, 3, 2, 0)]
     # conv: 2j + 3 - 3; pool: 2j + 1 - 1; conv without padding: 2j + 1 -> 8j + 4
     assert feature_cell_centres(layers) == (8, 4.0)
+
+
+def edge_pinhole(image_hw: tuple[int, int], eye, edge: str, margin_px: float) -> CameraCalibration:
+    """``pinhole`` with its principal point moved so that the blob (on the optical axis) lands
+    ``margin_px`` inside one edge of the image ("left", "right", "top" or "bottom")."""
+    calib = pinhole(image_hw, eye).to_dict()
+    h, w = image_hw
+    u, v = {
+        "left": (margin_px, (h - 1) / 2),
+        "right": (w - 1 - margin_px, (h - 1) / 2),
+        "top": ((w - 1) / 2, margin_px),
+        "bottom": ((w - 1) / 2, h - 1 - margin_px),
+    }[edge]
+    calib["K"][0][2], calib["K"][1][2] = u, v
+    return CameraCalibration.from_dict(calib)
+
+
+EDGE_CASES = [(8, (96, 96)), (8, (100, 100)), (16, (128, 128)), (16, (480, 480)), (32, (480, 640))]
+
+
+@pytest.mark.parametrize("edge", ["left", "right", "top", "bottom"])
+@pytest.mark.parametrize(
+    ("stride", "image_hw"), EDGE_CASES, ids=[f"s{s}-{h}x{w}" for s, (h, w) in EDGE_CASES]
+)
+def test_plane_peaks_at_a_blob_near_the_edge(edge, stride, image_hw):
+    """Within the last half-stride of the image the nearest feature cell is read, not the map's padding:
+    a blob there must still peak at its cell among the cells every camera sees (a sampler that fades to
+    zero at the edge moves the peak inwards)."""
+    calibs = [edge_pinhole(image_hw, eye, edge, margin_px=stride / 4) for eye in CAMERA_EYES]
+    cell = CELL_FOOTPRINTS * max(footprint(c, stride) for c in calibs)
+    volume = volume_around_blob("z", cell)
+    images = torch.stack([blob_image(c) for c in calibs])
+    pix_T_cam = torch.tensor([c.K for c in calibs], dtype=torch.float32)[None]
+    cam_T_world = torch.tensor([c.T_cam_world for c in calibs], dtype=torch.float32)[None]
+    assert plane_peak(images, pix_T_cam, cam_T_world, image_hw, volume, stride, seen_by_all=True) == (3, 3)
+
+
+@pytest.mark.parametrize("edge", ["left", "right", "top", "bottom"])
+@pytest.mark.parametrize(
+    ("stride", "image_hw"), EDGE_CASES, ids=[f"s{s}-{h}x{w}" for s, (h, w) in EDGE_CASES]
+)
+def test_a_blob_near_the_edge_is_read_at_the_strength_the_map_has_it(edge, stride, image_hw):
+    """One camera, one anchor at the blob: the OFG reads the blob's feature at (nearly) the strongest cell
+    of the map, the cell next to it, wherever it is in the image. A sampler whose last half-stride reads
+    the map's zero padding reads a fraction of it at the right and bottom edges."""
+    volume = FeatureVolume(tuple((c - 0.005, c + 0.005) for c in BLOB_WORLD), (1, 1, 1))
+    attention = uniform_cross_attention(volume, stride, 0.0)
+    for eye in CAMERA_EYES:
+        calib = edge_pinhole(image_hw, eye, edge, margin_px=stride / 4)
+        features = GaussianFilter(stride)(blob_image(calib)[None])[None]  # 1, 1, 1, h, w
+        geometry = camera_geometry(
+            volume.anchors_world(),
+            torch.tensor([[calib.K]], dtype=torch.float32),
+            torch.tensor([[calib.T_cam_world]], dtype=torch.float32),
+            image_hw,
+        )
+        assert geometry.anchor_visible.all()
+        with torch.no_grad():
+            plane, _, _ = attention(torch.zeros(1, 1, 1), features, geometry)
+        assert plane.item() >= 0.75 * features.max().item()
+
+
+@pytest.mark.parametrize("u", [0.0, 48.0, 80.0, 95.0])
+def test_a_constant_map_reads_the_same_up_to_the_image_edge(u):
+    """A constant feature map of a 96-pixel image (stride 32: cells centred at 0, 32, 64) reads its value
+    anywhere inside the image, the last half-stride included; outside the image it reads nothing."""
+    stride, image_hw = 32, (96, 96)
+    volume = FeatureVolume(((0.0, 1.0), (0.0, 1.0), (0.0, 1.0)), (1, 1, 1))
+    attention = uniform_cross_attention(volume, stride, 0.0)
+    features = torch.ones(1, 1, 1, 3, 3)  # B, S, D, h, w
+    uv_pix = torch.tensor([[u, 47.5], [47.5, u], [96.5, 47.5]])  # along u, along v, outside
+    grid = pixels_to_grid(uv_pix, image_hw)  # 3, 2
+    geometry = CameraGeometry(
+        anchor_grid=grid.view(1, 1, 3, 1, 2),  # B, S, Q, A, 2: three queries of one anchor
+        anchor_visible=torch.ones(1, 1, 3, 1, dtype=torch.bool),
+        descriptor=torch.zeros(1, 1, 3, CAMERA_GEOMETRY_DIM),
+        image_hw=image_hw,
+    )
+    with torch.no_grad():
+        plane, _, _ = attention(torch.zeros(1, 3, 1), features, geometry)
+    assert plane[0, :2, 0].tolist() == pytest.approx([1.0, 1.0], abs=1e-5)
+    assert plane[0, 2, 0].item() == pytest.approx(0.0, abs=1e-5)

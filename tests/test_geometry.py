@@ -8,6 +8,7 @@ from lerobot_omnid.geometry import (
     FeatureVolume,
     apply_transform,
     camera_centers_world,
+    clamp_to_feature_cells,
     crop_intrinsics,
     crop_theta,
     look_at,
@@ -143,3 +144,18 @@ def test_crop_theta_and_intrinsics_move_a_pixel_together():
     assert torch.allclose(uv[0], centroid, atol=1e-4)
     full = torch.tensor([[0.0, 0.0, 1.0, 1.0]])
     assert torch.allclose(crop_intrinsics(K[None], full, (60, 80))[0], K)
+
+
+def test_clamp_to_feature_cells_moves_only_the_image_margin_beyond_the_cells():
+    # 96 x 64 image, stride 32, offset 0: cells centred at u = 0, 32, 64 and v = 0, 32.
+    uv = torch.tensor(
+        [[-0.5, -0.5], [10.0, 20.0], [70.0, 40.0], [95.5, 63.5], [96.0, 30.0], [-3.0, 70.0], [80.0, 70.0]]
+    )
+    clamped = clamp_to_feature_cells(uv, (64, 96), (2, 3), stride=32, offset=0.0)
+    expected = torch.tensor(
+        [[0.0, 0.0], [10.0, 20.0], [64.0, 32.0], [64.0, 32.0], [96.0, 30.0], [-3.0, 70.0], [64.0, 70.0]]
+    )
+    assert torch.equal(clamped, expected)  # outside the image (per axis): untouched
+    # An offset moves the span of the cells with it.
+    shifted = clamp_to_feature_cells(torch.tensor([[1.0, 90.0]]), (96, 96), (3, 3), stride=32, offset=4.0)
+    assert torch.equal(shifted, torch.tensor([[4.0, 68.0]]))

@@ -14,6 +14,7 @@ from lerobot_omnid.geometry import (
     random_unit_vectors,
 )
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy, camera_dropout_mask
+from lerobot_omnid.policy.omni_feature_generator import OmniFeatureGenerator
 
 
 def rotation_angle_deg(R: torch.Tensor) -> torch.Tensor:
@@ -93,21 +94,48 @@ def test_camera_dropout_keeps_one_camera_and_training_stays_finite():
     loss.backward()
 
 
-def test_dropped_camera_is_left_out_of_the_plane():
-    policy = OmniDPolicy(tiny_config()).eval()
-    images = torch.rand(1, 1, 4, 3, 64, 64)
-    pix_T_cam, cam_T_world = policy.camera_matrices(1, (64, 64))
-    keep_all = torch.ones(1, 4, dtype=torch.bool)
-    drop_b = torch.tensor([[False, True, True, True]])
+def check_dropped_cameras_are_left_out_of_the_plane(policy: OmniDPolicy) -> None:
+    """Two samples with different cameras dropped (B in sample 0, D in sample 1): each sample's plane must
+    be the plane of its kept cameras alone, the attention renormalised over them."""
+    images = torch.rand(2, 1, 4, 3, 64, 64)
+    pix_T_cam, cam_T_world = policy.camera_matrices(2, (64, 64))
+    mask = torch.tensor([[False, True, True, True], [True, True, False, True]])
     with torch.no_grad():
-        _, full = policy.model.encode_images(images, pix_T_cam, cam_T_world, keep_all)
-        _, without = policy.model.encode_images(images, pix_T_cam, cam_T_world, drop_b)
-        other = images.clone()
-        other[:, :, 0] = torch.rand(1, 1, 3, 64, 64)  # camera B's image changes: no effect once dropped
-        _, without_other = policy.model.encode_images(other, pix_T_cam, cam_T_world, drop_b)
-    assert not torch.allclose(full.plane, without.plane)
-    assert torch.allclose(without.plane, without_other.plane, atol=1e-6)
-    assert not without.attention_weights[:, 0].any()
+        _, dropped = policy.model.encode_images(images, pix_T_cam, cam_T_world, mask)
+        for b in range(2):
+            kept = mask[b]
+            _, alone = policy.model.encode_images(
+                images[b : b + 1, :, kept], pix_T_cam[b : b + 1, kept], cam_T_world[b : b + 1, kept]
+            )
+            assert torch.allclose(dropped.plane[b], alone.plane[0], atol=1e-5), f"sample {b}"
+        _, full = policy.model.encode_images(images, pix_T_cam, cam_T_world)
+    assert not torch.allclose(full.plane, dropped.plane, atol=1e-3)
+    assert not dropped.attention_weights[0, 0].any() and not dropped.attention_weights[1, 2].any()
+
+
+def test_dropped_cameras_are_left_out_of_the_plane():
+    check_dropped_cameras_are_left_out_of_the_plane(OmniDPolicy(tiny_config()).eval())
+
+
+@pytest.mark.parametrize("fault", ["mask after the softmax", "mask ignored", "sample 0's mask for all"])
+def test_the_dropout_check_catches_a_faulty_mask(monkeypatch, fault):
+    """The check above can fail: a mask applied after the softmax (the dropped camera's samples zeroed,
+    the others' weights not renormalised), a mask ignored, or sample 0's mask used for the batch."""
+    forward = OmniFeatureGenerator.forward
+
+    def faulty(self, feature_maps, pix_T_cam, cam_T_world, image_hw, camera_mask=None):
+        if camera_mask is not None and fault == "mask after the softmax":
+            feature_maps = feature_maps * camera_mask[:, :, None, None, None]
+            camera_mask = None
+        elif camera_mask is not None and fault == "mask ignored":
+            camera_mask = None
+        elif camera_mask is not None:
+            camera_mask = camera_mask[:1].expand_as(camera_mask)
+        return forward(self, feature_maps, pix_T_cam, cam_T_world, image_hw, camera_mask)
+
+    monkeypatch.setattr(OmniFeatureGenerator, "forward", faulty)
+    with pytest.raises(AssertionError):
+        check_dropped_cameras_are_left_out_of_the_plane(OmniDPolicy(tiny_config()).eval())
 
 
 def test_noise_options_are_validated():

@@ -23,6 +23,7 @@ from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
+import torch
 from lerobot.utils.constants import OBS_IMAGES, OBS_STR
 from torch import Tensor
 
@@ -110,3 +111,52 @@ def extrinsics_from_column[Array: (np.ndarray, Tensor)](values: Array) -> Array:
 def intrinsics_from_column[Array: (np.ndarray, Tensor)](values: Array) -> Array:
     """(..., 9) column values (numpy or torch) -> (..., 3, 3) ``K``, same type and dtype."""
     return _from_column(values, INTRINSICS_SHAPE, "intrinsics")
+
+
+FRAME_TOLERANCE = 1e-3
+"""Absolute tolerance of the per-frame checks: float32 columns of a proper K and a rigid T are exact to
+about 1e-6; an all-zero or garbled column is off by order 1."""
+
+
+def frame_calibration_problem(
+    K: Tensor, cam_T_world: Tensor, tolerance: float = FRAME_TOLERANCE
+) -> tuple[tuple[int, ...], str] | None:
+    """The first frame whose calibration is not a camera's, and why; None when every frame is one.
+
+    The per-frame twin of :meth:`lerobot_omnid.calibration.schema.CameraCalibration.validate`, vectorised
+    and with a tolerance for float32 columns.
+
+    Args:
+        K: (..., 3, 3) intrinsics, expected ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with fx, fy > 0.
+        cam_T_world: (..., 4, 4) extrinsics, expected rigid: orthonormal rotation of determinant +1, last
+            row ``[0, 0, 0, 1]``.
+    Returns:
+        (index into the leading dims, reason) of the first bad frame, or None.
+    """
+    K, T = K.double(), cam_T_world.double()
+    R = T[..., :3, :3]
+    eye = torch.eye(3, dtype=R.dtype, device=R.device)
+    checks = (
+        (~torch.isfinite(K).all(dim=(-1, -2)), "K has non-finite values"),
+        (~torch.isfinite(T).all(dim=(-1, -2)), "T_cam_world has non-finite values"),
+        (
+            (K[..., 0, 0] <= 0)
+            | (K[..., 1, 1] <= 0)
+            | (K[..., 1, 0].abs() > tolerance)
+            | ((K[..., 2, :] - K.new_tensor([0.0, 0.0, 1.0])).abs() > tolerance).any(dim=-1),
+            "K is not [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
+        ),
+        (
+            ((T[..., 3, :] - T.new_tensor([0.0, 0.0, 0.0, 1.0])).abs() > tolerance).any(dim=-1),
+            "T_cam_world's last row is not [0, 0, 0, 1]",
+        ),
+        (
+            ((R @ R.transpose(-1, -2) - eye).abs() > tolerance).any(dim=(-1, -2)) | (torch.linalg.det(R) < 0),
+            "T_cam_world's rotation part is not a rotation (orthonormal, determinant +1)",
+        ),
+    )
+    for bad, reason in checks:
+        if bad.any():
+            index = tuple(int(i) for i in bad.nonzero()[0])
+            return index, reason
+    return None

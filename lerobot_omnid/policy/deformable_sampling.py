@@ -57,6 +57,12 @@ def multi_camera_deformable_sampling(
             f"attention_weights: expected shape {(B, S, Q, heads, N)}, got {tuple(attention_weights.shape)}"
         )
 
+    # Under mixed precision the locations stay in full precision (a bf16 grid coordinate is off by up to
+    # a pixel per 128 of image width): sample in the wider of the two dtypes.
+    dtype = torch.promote_types(values.dtype, sampling_grid.dtype)
+    values, sampling_grid, attention_weights = (
+        t.to(dtype) for t in (values, sampling_grid, attention_weights)
+    )
     # B, S, heads, Dh, H, W -> B*S*heads, Dh, H, W
     flat_values = values.reshape(B * S * heads, Dh, H, W)
     # B, S, Q, heads, N, 2 -> B, S, heads, Q, N, 2 -> B*S*heads, Q, N, 2

@@ -23,6 +23,7 @@ from torch import Tensor, nn
 from lerobot_omnid.calibration.frame_columns import (
     extrinsics_from_column,
     extrinsics_key,
+    frame_calibration_problem,
     intrinsics_from_column,
     intrinsics_key,
 )
@@ -46,7 +47,8 @@ from lerobot_omnid.policy.model_card import find_eval_results, omnid_card_sectio
 from lerobot_omnid.policy.omni_feature_generator import OFGOutput, OmniFeatureGenerator
 
 FRAME_MATRICES = ("omnid.pix_T_cam", "omnid.cam_T_world")
-"""Keys of the per-frame matrices among the stacked (and queued) inputs: (B, [T,] S, 3, 3) and 4x4."""
+"""Keys of every frame's camera matrices among the stacked (and queued) inputs: (B, [T,] S, 3, 3) and 4x4,
+for the backbone's input size, static and per-frame calibration alike."""
 
 
 def camera_dropout_mask(batch_size: int, num_cameras: int, p: float, device: torch.device) -> Tensor:
@@ -64,6 +66,23 @@ def resize_images(images: Tensor, image_hw: tuple[int, int]) -> Tensor:
         images.flatten(0, -4), size=image_hw, mode="bilinear", align_corners=False, antialias=True
     )
     return x.unflatten(0, images.shape[:-3])
+
+
+def _frame_name(batch: Mapping[str, Tensor], index: tuple[int, ...], lead: torch.Size) -> str:
+    """Which frame ``index`` (into the (B, [T]) leading dims) is: the sample and observation step, and its
+    episode and frame when the batch has LeRobot's ``episode_index`` / ``frame_index`` (those of each
+    sample's last step; earlier steps are earlier frames of the episode, its first repeated as padding)."""
+    parts = [f"batch sample {index[0]}"]
+    steps_back = 0
+    if len(lead) > 1:
+        parts.append(f"observation step {index[1]} of {lead[1]}")
+        steps_back = lead[1] - 1 - index[1]
+    if "episode_index" in batch:
+        parts.append(f"episode {int(batch['episode_index'].reshape(lead[0], -1)[index[0], -1])}")
+    if "frame_index" in batch:
+        frame = int(batch["frame_index"].reshape(lead[0], -1)[index[0], -1]) - steps_back
+        parts.append(f"frame {max(frame, 0)}")
+    return ", ".join(parts)
 
 
 class OmniDPolicy(PreTrainedPolicy):
@@ -108,7 +127,7 @@ class OmniDPolicy(PreTrainedPolicy):
 
     def reset(self) -> None:
         """Clear observation and action queues. Called on ``env.reset()``."""
-        observed = (OBS_STATE, OBS_IMAGES, *(FRAME_MATRICES if self.config.frame_calibration else ()))
+        observed = (OBS_STATE, OBS_IMAGES, *(FRAME_MATRICES if self.config.use_ofg else ()))
         self._queues = {key: deque(maxlen=self.config.n_obs_steps) for key in observed}
         self._queues[ACTION] = deque(maxlen=self.config.n_action_steps)
 
@@ -125,8 +144,16 @@ class OmniDPolicy(PreTrainedPolicy):
         """Replace the calibration of some cameras (keyed by image feature key), in the config too.
 
         Use this, not ``config.camera_calibration``, on a policy that exists: its matrices are built from
-        the calibrations parsed here.
+        the calibrations parsed here. A camera calibrated per frame (``config.frame_calibration``) is
+        refused: its frames' own calibration would win, and the one given here would never be used.
         """
+        per_frame = sorted(k for k in calibrations if k in self.config.frame_calibration)
+        if per_frame:
+            raise CalibrationError(
+                f"set_calibration: {per_frame} are calibrated per frame (`frame_calibration`), from the "
+                f"columns of every observation; a static calibration for them would never be used. Give "
+                f"the calibration in those columns instead."
+            )
         for key, calib in calibrations.items():
             calib.validate(key)
             self.config.camera_calibration[key] = calib.to_dict()
@@ -148,7 +175,7 @@ class OmniDPolicy(PreTrainedPolicy):
         S = len(self.camera_keys)
         if key != self._matrices_key:
             # Cameras calibrated per frame have no static matrices: identity placeholders, replaced by
-            # every frame's own in _stack_inputs.
+            # every frame's own in frame_matrices.
             static = [i for i, k in enumerate(self.camera_keys) if k not in self.config.frame_calibration]
             pix_T_cam, cam_T_world = torch.eye(3).repeat(S, 1, 1), torch.eye(4).repeat(S, 1, 1)
             if static:
@@ -197,49 +224,62 @@ class OmniDPolicy(PreTrainedPolicy):
                 )
             images = [resize_images(img, tuple(self.config.resize_shape)) for img in images]
         stacked = {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
-        if self.config.frame_calibration and self.config.use_ofg:
-            stacked.update(zip(FRAME_MATRICES, self._frame_matrices(batch, sizes), strict=True))
+        if self.config.use_ofg:
+            stacked.update(zip(FRAME_MATRICES, self.frame_matrices(batch, sizes), strict=True))
         return stacked
 
-    def _frame_matrices(
+    def frame_matrices(
         self, batch: dict[str, Tensor], sizes: tuple[tuple[int, int], ...]
     ) -> tuple[Tensor, Tensor]:
-        """Every frame's calibration: the columns of the cameras in ``config.frame_calibration``, the static
-        matrices for the others.
+        """Every frame's calibration, the one path from calibration to the OFG: the columns of the cameras in
+        ``config.frame_calibration`` (checked frame by frame), the static matrices for the others.
 
         Args:
-            batch: with ``observation.extrinsics.<cam>`` (B, [T,] 16) and ``observation.intrinsics.<cam>``
-                (B, [T,] 9), K for that camera's image size in the batch.
+            batch: the policy's input, with ``observation.state`` (B, [T,] Ds) and, for each camera
+                calibrated per frame, ``observation.extrinsics.<cam>`` (B, [T,] 16) and
+                ``observation.intrinsics.<cam>`` (B, [T,] 9), K for that camera's image size in the batch.
             sizes: each camera's image size in the batch.
         Returns:
             pix_T_cam (B, [T,] S, 3, 3) for the backbone's input size and cam_T_world (B, [T,] S, 4, 4).
         """
         input_hw = tuple(self.config.resize_shape or sizes[0])
-        state = batch[OBS_STATE]
-        lead = state.shape[:-1]  # B, [T]
+        lead = batch[OBS_STATE].shape[:-1]  # B, [T]
         static = self.camera_matrices(1, input_hw)  # 1, S, ...
-        pix_T_cam, cam_T_world = (m[0].expand(*lead, *m.shape[1:]).clone() for m in static)  # B, [T,] S, ...
-        for i, key in enumerate(self.camera_keys):
-            if key not in self.config.frame_calibration:
-                continue
-            columns = []
-            for column_key, size in ((intrinsics_key(key), 9), (extrinsics_key(key), 16)):
-                if column_key not in batch:
-                    raise KeyError(
-                        f"`{column_key}` is missing from the batch: {key} is calibrated per frame "
-                        f"(`frame_calibration`); keys: {sorted(batch)}"
-                    )
-                value = batch[column_key]
-                if tuple(value.shape) != (*lead, size) or not torch.isfinite(value).all():
-                    raise ValueError(
-                        f"`{column_key}`: expected finite values of shape {(*lead, size)}, got "
-                        f"{tuple(value.shape)}"
-                    )
-                columns.append(value.to(pix_T_cam.dtype))
-            K = intrinsics_from_column(columns[0])
-            pix_T_cam[..., i, :, :] = resize_intrinsics(K, sizes[i], input_hw)
-            cam_T_world[..., i, :, :] = extrinsics_from_column(columns[1])
+        pix_T_cam, cam_T_world = (m[0].expand(*lead, *m.shape[1:]) for m in static)  # B, [T,] S, ...
+        per_frame = [i for i, key in enumerate(self.camera_keys) if key in self.config.frame_calibration]
+        if not per_frame:
+            return pix_T_cam, cam_T_world
+        pix_T_cam, cam_T_world = pix_T_cam.clone(), cam_T_world.clone()
+        for i in per_frame:
+            K, T = self._frame_columns(batch, self.camera_keys[i], lead)
+            pix_T_cam[..., i, :, :] = resize_intrinsics(K.to(pix_T_cam.dtype), sizes[i], input_hw)
+            cam_T_world[..., i, :, :] = T.to(cam_T_world.dtype)
         return pix_T_cam, cam_T_world
+
+    def _frame_columns(self, batch: dict[str, Tensor], key: str, lead: torch.Size) -> tuple[Tensor, Tensor]:
+        """K (*lead, 3, 3) and T_cam_world (*lead, 4, 4) of camera ``key`` from its columns, every frame
+        checked like a static calibration (a proper K, a rigid transform)."""
+        columns = []
+        for column_key, size in ((intrinsics_key(key), 9), (extrinsics_key(key), 16)):
+            if column_key not in batch:
+                raise KeyError(
+                    f"`{column_key}` is missing from the batch: {key} is calibrated per frame "
+                    f"(`frame_calibration`); keys: {sorted(batch)}"
+                )
+            value = batch[column_key]
+            if tuple(value.shape) != (*lead, size):
+                raise ValueError(f"`{column_key}`: expected shape {(*lead, size)}, got {tuple(value.shape)}")
+            columns.append(value)
+        K, T = intrinsics_from_column(columns[0]), extrinsics_from_column(columns[1])
+        problem = frame_calibration_problem(K, T)
+        if problem is not None:
+            index, reason = problem
+            raise CalibrationError(
+                f"{key}: the per-frame calibration of {_frame_name(batch, index, lead)} is not a camera's: "
+                f"{reason} (columns `{intrinsics_key(key)}`, `{extrinsics_key(key)}`; "
+                f"K = {K[index].tolist()}, T_cam_world = {T[index].tolist()})"
+            )
+        return K, T
 
     def _check_image_sizes(self, sizes: tuple[tuple[int, int], ...]) -> None:
         """Each camera's images must be its calibrated image resized uniformly, unless they were stretched.
@@ -266,19 +306,26 @@ class OmniDPolicy(PreTrainedPolicy):
         images = stacked[OBS_IMAGES]
         if not self.config.use_ofg:
             return self.model.global_condition(images, stacked[OBS_STATE], None, None)
-        if FRAME_MATRICES[0] in stacked:
-            pix_T_cam, cam_T_world = (stacked[k] for k in FRAME_MATRICES)  # B, T, S, ...
-        else:
-            pix_T_cam, cam_T_world = self.camera_matrices(images.shape[0], tuple(images.shape[-2:]))
+        pix_T_cam, cam_T_world = (stacked[k] for k in FRAME_MATRICES)  # B, T, S, ...
         camera_mask = None
         if augment:
+            images, pix_T_cam, cam_T_world, camera_mask = self._augment(images, pix_T_cam, cam_T_world)
+        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world, camera_mask)
+
+    def _augment(
+        self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
+    ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+        """The training-time options that keep images and calibration consistent: crop, calibration noise,
+        camera dropout. Geometry in full precision (autocast off): see the OFG."""
+        camera_mask = None
+        with torch.autocast(images.device.type, enabled=False):
             if self.config.random_crop_min_scale < 1:
                 images, pix_T_cam = self._random_crop(images, pix_T_cam)
-            pix_T_cam, cam_T_world = self._calibration_noise(pix_T_cam, cam_T_world)
-            if self.config.camera_dropout > 0:
-                B, S = images.shape[0], images.shape[2]  # images: B, T, S, 3, H, W
-                camera_mask = camera_dropout_mask(B, S, self.config.camera_dropout, images.device)
-        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world, camera_mask)
+            pix_T_cam, cam_T_world = self._calibration_noise(pix_T_cam.float(), cam_T_world.float())
+        if self.config.camera_dropout > 0:
+            B, S = images.shape[0], images.shape[2]  # images: B, T, S, 3, H, W
+            camera_mask = camera_dropout_mask(B, S, self.config.camera_dropout, images.device)
+        return images, pix_T_cam, cam_T_world, camera_mask
 
     def _calibration_noise(self, pix_T_cam: Tensor, cam_T_world: Tensor) -> tuple[Tensor, Tensor]:
         """The training-time calibration noise of the config, per sample and camera (every observation

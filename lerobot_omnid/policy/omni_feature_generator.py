@@ -21,6 +21,7 @@ from torch import Tensor, nn
 
 from lerobot_omnid.geometry import (
     camera_centers_world,
+    clamp_to_feature_cells,
     grid_to_pixels,
     pixels_to_feature_grid,
     project_to_grid,
@@ -146,10 +147,16 @@ class CameraCrossAttention(nn.Module):
         offsets = offsets * offsets.new_tensor([2.0 / image_w, 2.0 / image_h]) * self.feature_stride
         # B, S, Q, A, 2 -> B, S, Q, 1, A, 1, 2 (+ offsets) -> B, S, Q, heads, A, P, 2
         sampling_grid = geometry.anchor_grid[:, :, :, None, :, None, :] + offsets
-        # Image grid -> pixels -> the feature map's own grid, where each cell really is.
-        feature_grid = pixels_to_feature_grid(
-            grid_to_pixels(sampling_grid, geometry.image_hw), (H, W), self.feature_stride, self.feature_offset
+        # Image grid -> pixels (inside the image: onto the cells that cover them) -> the feature map's own
+        # grid, where each cell really is.
+        uv_pix = clamp_to_feature_cells(
+            grid_to_pixels(sampling_grid, geometry.image_hw),
+            geometry.image_hw,
+            (H, W),
+            self.feature_stride,
+            self.feature_offset,
         )
+        feature_grid = pixels_to_feature_grid(uv_pix, (H, W), self.feature_stride, self.feature_offset)
 
         logits = self.attention_logits(camera_queries).view(B, S, Q, heads, A, P)
         mask = geometry.anchor_visible[:, :, :, None, :, None].expand(B, S, Q, heads, A, P)
@@ -304,7 +311,12 @@ class OmniFeatureGenerator(nn.Module):
             camera_mask: (B, S) bool, False for a camera to leave out (as if it saw none of the volume).
         """
         B, S = feature_maps.shape[:2]
-        geometry = camera_geometry(self.anchors_world, pix_T_cam.float(), cam_T_world.float(), image_hw)
+        # Projections in full precision: under autocast the matmuls would run in fp16 / bf16, moving
+        # projections by pixels and flipping the visibility of anchors near the image edges.
+        with torch.autocast(feature_maps.device.type, enabled=False):
+            geometry = camera_geometry(
+                self.anchors_world.float(), pix_T_cam.float(), cam_T_world.float(), image_hw
+            )
         if camera_mask is not None:
             visible = geometry.anchor_visible & camera_mask[:, :, None, None]
             geometry = dataclasses.replace(geometry, anchor_visible=visible)
