@@ -13,6 +13,7 @@ from lerobot_omnid.geometry import (
     perturb_intrinsics,
     random_unit_vectors,
 )
+from lerobot_omnid.policy import omni_feature_generator
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy, camera_dropout_mask
 from lerobot_omnid.policy.omni_feature_generator import OmniFeatureGenerator
 
@@ -122,15 +123,20 @@ def test_the_dropout_check_catches_a_faulty_mask(monkeypatch, fault):
     """The check above can fail: a mask applied after the softmax (the dropped camera's samples zeroed,
     the others' weights not renormalised), a mask ignored, or sample 0's mask used for the batch."""
     forward = OmniFeatureGenerator.forward
+    sampling = omni_feature_generator.multi_camera_deformable_sampling
 
     def faulty(self, feature_maps, pix_T_cam, cam_T_world, image_hw, camera_mask=None):
         if camera_mask is not None and fault == "mask after the softmax":
-            feature_maps = feature_maps * camera_mask[:, :, None, None, None]
-            camera_mask = None
-        elif camera_mask is not None and fault == "mask ignored":
-            camera_mask = None
-        elif camera_mask is not None:
-            camera_mask = camera_mask[:1].expand_as(camera_mask)
+            mask = camera_mask[:, :, None, None, None]  # B, S -> B, S, Q, heads, N
+
+            def zeroed_after_softmax(values, grid, weights, **kwargs):
+                return sampling(values, grid, weights * mask, **kwargs)
+
+            with monkeypatch.context() as m:
+                m.setattr(omni_feature_generator, "multi_camera_deformable_sampling", zeroed_after_softmax)
+                return forward(self, feature_maps, pix_T_cam, cam_T_world, image_hw, None)
+        if camera_mask is not None:
+            camera_mask = None if fault == "mask ignored" else camera_mask[:1].expand_as(camera_mask)
         return forward(self, feature_maps, pix_T_cam, cam_T_world, image_hw, camera_mask)
 
     monkeypatch.setattr(OmniFeatureGenerator, "forward", faulty)
