@@ -7,11 +7,13 @@ import math
 
 import numpy as np
 import pytest
+import torch
 from gym_omnid.rotations import rot6d_from_matrix, topdown_rotation
 from lerobot.policies import make_pre_post_processors
 from omnid_testing import make_tiny_dataset, tiny_config
 
-from lerobot_omnid.benchmark.offline_eval import action_errors, main, rotation_angle_deg
+from lerobot_omnid.benchmark.offline_eval import action_errors, evaluate_offline, main, rotation_angle_deg
+from lerobot_omnid.calibration.attach_calibration import main as attach_calibration
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 
@@ -84,6 +86,39 @@ def test_replays_every_frame_of_every_episode_through_a_saved_checkpoint(tmp_pat
             ]
         )
     assert "episodes: expected 1..2" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_a_per_frame_policy_reads_every_frames_calibration_columns(tmp_path) -> None:
+    """A policy whose cameras are calibrated per frame is given the dataset's calibration columns: on a
+    copy of a dataset whose columns hold its static calibration, it makes the predictions of the same
+    weights calibrated statically on the original."""
+    cams = ("cam_b", "cam_c")
+    keys = [f"observation.images.{cam}" for cam in cams]
+    static_root, columns_root = tmp_path / "static", tmp_path / "columns"
+    dataset = make_tiny_dataset(static_root, cams=cams, size=32, episodes=1, frames=5)
+    assert attach_calibration(["--root", str(static_root), "--per-frame-columns", str(columns_root)]) == 0
+    # The plane enters the condition from the start, so that the calibration changes the predictions.
+    static = OmniDPolicy(tiny_config(cams, size=32, zero_init_compression=False))
+    per_frame = OmniDPolicy(
+        tiny_config(cams, size=32, zero_init_compression=False, camera_calibration={}, frame_calibration=keys)
+    )
+    per_frame.load_state_dict(static.state_dict())
+
+    results = {}
+    for name, policy, root in (("static", static, static_root), ("per_frame", per_frame, columns_root)):
+        checkpoint = tmp_path / f"checkpoint_{name}"
+        policy.save_pretrained(checkpoint)
+        for processor in make_pre_post_processors(policy.config, dataset_stats=dataset.meta.stats):
+            processor.save_pretrained(checkpoint)
+        torch.manual_seed(0)  # the same diffusion noise for both
+        results[name] = evaluate_offline(checkpoint, root)
+    assert (
+        json.loads((tmp_path / "checkpoint_per_frame" / "config.json").read_text())["frame_calibration"]
+        == keys
+    )
+    assert results["per_frame"]["frames"] == 5
+    for key in ("position_cm", "rotation_deg", "gripper"):
+        assert results["per_frame"][key] == pytest.approx(results["static"][key], rel=1e-4, abs=1e-5)
 
 
 def test_missing_checkpoint_or_dataset_is_named(tmp_path, capsys) -> None:

@@ -23,6 +23,7 @@ import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -30,7 +31,11 @@ from gym_omnid.rotations import matrix_from_rot6d
 from lerobot.utils.constants import ACTION, OBS_STATE
 from tqdm import tqdm
 
+from lerobot_omnid.calibration.frame_columns import extrinsics_key, intrinsics_key
 from lerobot_omnid.cli import positive_int
+
+if TYPE_CHECKING:
+    from lerobot.configs.policies import PreTrainedConfig
 
 POSITION, ROT6D, GRIPPER = slice(0, 3), slice(3, 9), 9  # layout of the gym_omnid action
 # The gym_omnid state starts with the measured pose and gripper in the action's layout: as an action it
@@ -73,6 +78,18 @@ def load_policy(checkpoint: Path, meta, device: str):
     return policy, preprocessor, postprocessor
 
 
+def policy_inputs(config: PreTrainedConfig) -> list[str]:
+    """The dataset keys a policy reads at every frame: its input features and, for an OmniD policy with
+    cameras calibrated per frame (``frame_calibration``), their calibration columns, which OmniD keeps out
+    of its input features (they are neither normalised nor state) but reads from every observation."""
+    columns = [
+        column
+        for key in getattr(config, "frame_calibration", None) or ()
+        for column in (extrinsics_key(key), intrinsics_key(key))
+    ]
+    return [*config.input_features, *columns]
+
+
 def evaluate_offline(
     checkpoint: Path, root: Path, repo_id: str | None = None, episodes: int | None = None, device: str = "cpu"
 ) -> dict:
@@ -92,7 +109,7 @@ def evaluate_offline(
     selected = list(range(episodes or meta.total_episodes))
     dataset = LeRobotDataset(repo_id, root=root, episodes=selected, video_backend="pyav")
     policy, preprocessor, postprocessor = load_policy(checkpoint, meta, device)
-    inputs = list(policy.config.input_features)
+    inputs = policy_inputs(policy.config)
     missing = [key for key in inputs if key not in meta.features]
     if missing:
         raise ValueError(

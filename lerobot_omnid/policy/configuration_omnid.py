@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +26,17 @@ from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
 NOISE_SCHEDULERS = ("DDPM", "DDIM")
 PREDICTION_TYPES = ("epsilon", "sample")
+OFG_ONLY_OPTIONS = {
+    "random_crop_min_scale": 1.0,
+    "calibration_noise_rotation_deg": 0.0,
+    "calibration_noise_translation_mm": 0.0,
+    "calibration_noise_focal_pct": 0.0,
+    "calibration_noise_principal_px": 0.0,
+    "camera_dropout": 0.0,
+}
+"""Training augmentations that act in the OFG's path, each with the value that turns it off."""
+
+logger = logging.getLogger(__name__)
 
 
 @PreTrainedConfig.register_subclass("omnid")
@@ -61,7 +73,9 @@ class OmniDConfig(PreTrainedConfig):
         calibration_path: A calibration file (``lerobot_omnid.calibration.rig_file``) whose cameras override
             ``camera_calibration`` and the dataset's, e.g. to evaluate on a rig whose cameras moved. Read
             once when the config is made and merged into ``camera_calibration``; then set to None, so a
-            saved ``config.json`` carries the calibration itself and never depends on the file.
+            saved ``config.json`` carries the calibration itself and never depends on the file. A file none
+            of whose cameras the policy uses, or with an entry for a camera in ``frame_calibration``, is
+            refused, since it would be ignored.
         vision_backbone: torchvision ResNet shared by all cameras ("resnet18"; "resnet101" for the
             paper's ablation).
         pretrained_backbone_weights: Pretrained backbone weights, as LeRobot's diffusion policy takes them:
@@ -104,7 +118,9 @@ class OmniDConfig(PreTrainedConfig):
             (as in the authors' code); the state still conditions with all ``n_obs_steps``. Encoding
             costs 1 / n_obs_steps as much; what the head loses is the image history.
         use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
-            concatenated in camera order instead of the 3D feature (then the cameras are fixed).
+            concatenated in camera order instead of the 3D feature (then the cameras are fixed). The
+            augmentations of the OFG's path (``random_crop_min_scale``, ``calibration_noise_*``,
+            ``camera_dropout``) would do nothing there and must then be off.
         volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
             base frame, metres.
         volume_shape: Cells along (x, y, z).
@@ -231,7 +247,23 @@ class OmniDConfig(PreTrainedConfig):
     scheduler_warmup_steps: int = 500
 
     def __post_init__(self) -> None:
-        super().__post_init__()
+        """Validate the fields (errors name the field, what was expected and what was given) and bring them
+        into canonical form; read ``calibration_path``.
+
+        The error is also logged before it is raised: ``lerobot-train --policy.type=omnid`` parses its
+        options with draccus, which replaces a ``ValueError`` or ``TypeError`` raised while the config is
+        built by "Couldn't instantiate class OmniDConfig" and drops its message, so without the log the
+        command line user would never read what is wrong.
+        """
+        try:
+            super().__post_init__()
+            self._check_and_normalise()
+        except (TypeError, ValueError) as error:
+            logger.error("OmniDConfig: %s", error)
+            raise
+
+    def _check_and_normalise(self) -> None:
+        """The checks and conversions of ``__post_init__``."""
         check_choice("vision_backbone", self.vision_backbone, BACKBONES)
         check_choice("noise_scheduler_type", self.noise_scheduler_type, NOISE_SCHEDULERS)
         check_choice("prediction_type", self.prediction_type, PREDICTION_TYPES)
@@ -284,6 +316,14 @@ class OmniDConfig(PreTrainedConfig):
                 raise ValueError(f"`{name}`: expected a standard deviation >= 0, got {getattr(self, name)}")
         if not 0 <= self.camera_dropout < 1:
             raise ValueError(f"`camera_dropout`: expected a probability in [0, 1), got {self.camera_dropout}")
+        if not self.use_ofg:
+            for name, off in OFG_ONLY_OPTIONS.items():
+                if getattr(self, name) != off:
+                    raise ValueError(
+                        f"`{name}`: expected {off} (off) with use_ofg=false, got {getattr(self, name)}: it "
+                        f"augments the images and calibrations the OFG fuses, and the 'w/o OFG' ablation "
+                        f"has no OFG, so it would have no effect"
+                    )
         self.volume_bounds = tuple(tuple(float(v) for v in b) for b in self.volume_bounds)
         self.volume_shape = tuple(int(n) for n in self.volume_shape)
         try:
@@ -298,7 +338,10 @@ class OmniDConfig(PreTrainedConfig):
         # A calibration file is read once, here, and merged; the saved config never refers to it again.
         self._calibration_overrides: dict[str, dict] = {}
         if self.calibration_path is not None:
-            from_file = load_calibration_file(self.calibration_path)
+            try:
+                from_file = load_calibration_file(self.calibration_path)
+            except CalibrationError as e:
+                raise CalibrationError(f"`calibration_path`: {e}") from e
             self._calibration_overrides = {key: calib.to_dict() for key, calib in from_file.items()}
             self.camera_calibration.update(self._calibration_overrides)
             self.calibration_path = None
@@ -356,9 +399,19 @@ class OmniDConfig(PreTrainedConfig):
             for k in image_keys
             if extrinsics_key(k) in dataset_features and intrinsics_key(k) in dataset_features
         ]
+        # A calibration file that would be ignored (no camera in common, or a camera calibrated per frame)
+        # is a mistake, not a preference.
+        from_file = self._calibration_overrides
+        if from_file and not set(from_file) & set(image_keys):
+            raise CalibrationError(
+                f"`calibration_path`: none of the file's cameras {sorted(from_file)} is an image feature of "
+                f"the dataset that the policy uses {image_keys}, so the file would be ignored and the "
+                f"dataset's calibration trained instead; key the file by these cameras (`<cam>` or "
+                f"`observation.images.<cam>`)"
+            )
+        self._check_no_override_of_frame_calibration()
         # The "w/o OFG" ablation does not use calibration: keep whatever the dataset has.
         # A calibration file given with this config overrides the dataset's static calibration.
-        from_file = self._calibration_overrides
         self.camera_calibration = {
             k: from_file[k]
             if k in from_file
@@ -378,8 +431,21 @@ class OmniDConfig(PreTrainedConfig):
             }
             self.input_features = {**others, **dataset_images}
 
+    def _check_no_override_of_frame_calibration(self) -> None:
+        """Refuse a calibration file's entry for a camera calibrated per frame: the policy reads that
+        camera's calibration from every frame's columns, so the entry would be silently ignored."""
+        overridden = sorted(k for k in self._calibration_overrides if k in self.frame_calibration)
+        if overridden:
+            raise CalibrationError(
+                f"`calibration_path`: the file calibrates {overridden}, but the policy reads their "
+                f"calibration from every frame (`frame_calibration`: {self.frame_calibration}, from the "
+                f"columns observation.extrinsics.<cam> / observation.intrinsics.<cam>), so the file's entry "
+                f"would be ignored; remove {overridden} from the file"
+            )
+
     def validate_features(self) -> None:
         self._select_cameras()
+        self._check_no_override_of_frame_calibration()
         if not self.image_features:
             raise ValueError("OmniD needs at least one `observation.images.*` input feature.")
         if self.robot_state_feature is None:
