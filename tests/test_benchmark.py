@@ -41,7 +41,6 @@ from lerobot_omnid.benchmark.plan import (
     available_tasks,
     build_plan,
     control_setting,
-    is_done,
 )
 from lerobot_omnid.benchmark.report import (
     ablation_table,
@@ -57,6 +56,8 @@ from lerobot_omnid.benchmark.report import (
 from lerobot_omnid.benchmark.results import EvalEntry, EvalRecord, collect, record_of
 from lerobot_omnid.benchmark.stats import fisher_exact
 from lerobot_omnid.calibration.rig_file import load_calibration_file
+from lerobot_omnid.measure import engine
+from lerobot_omnid.measure.engine import is_done
 
 LABELS = bench.LABELS
 
@@ -278,7 +279,7 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
 def test_fewshot_report_has_each_fine_tuned_models_blind_control(monkeypatch, tmp_path):
     calls: list[str] = []
     rates = {"omnid": 60.0, "omnid/blind": 10.0, "diffusion": 20.0}
-    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, rates))
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates))
     assert bench.main(["--profile", "mini-fewshot", "--out", str(tmp_path)]) == 0
     report = (tmp_path / "report.md").read_text()
     for task in (TASK0, TASK1):
@@ -294,7 +295,7 @@ def test_fewshot_report_has_each_fine_tuned_models_blind_control(monkeypatch, tm
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     calls: list[str] = []
     rates = {"omnid": 60.0, "diffusion": 20.0, "omnid/scrambled": 10.0}
-    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, rates))
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates))
     monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
     out = tmp_path / "bench"
     assert bench.main(["--out", str(out)]) == 0
@@ -339,47 +340,37 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     assert "| DP | 8.0 / 0.25 |" in report
     assert calls.count("omnid-offline-eval") == 12
     assert "48 runs: 48 ran" in capsys.readouterr().out
-    # Each finished evaluation's summary, and the folder's.
-    run_summary = json.loads(
-        (out / "eval_blind" / "omnid" / TASK0 / "id" / "seed1" / "run_summary.json").read_text()
-    )
-    assert run_summary["commit"] == "abc123" and run_summary["control"] == "blind"
-    assert (run_summary["successes"], run_summary["episodes"], run_summary["train_seed"]) == (0, 10, 1000)
+    # Each finished evaluation's stamp (commit, command), and the folder's summary.
+    stamp = json.loads((out / "stamps" / "eval_blind" / "omnid" / TASK0 / "id" / "seed1.json").read_text())
+    assert stamp["commit"] == "abc123"
     assert (
         "--policy.calibration_path=" + str(out / "controls" / "omnid" / TASK0 / "blind.json")
-        in run_summary["command"]
+        in (stamp["command"])
     )
     folder = json.loads((out / "summary.json").read_text())
     assert folder["commit"] == "abc123" and folder["command"] == ["omnid-benchmark", "--out", str(out)]
     assert len(folder["evaluations"]) == 24
+    blind = next(e for e in folder["evaluations"] if e["control"] == "blind" and e["model"] == "omnid")
+    counts = (blind["successes"], blind["episodes"], blind["train_seed"], blind["commit"])
+    assert counts == (0, 10, 1000, "abc123")
 
-    # Resume: nothing finished is redone; an eval whose result is gone, an incomplete training run (its folder
-    # without a checkpoint) and a dataset with too few episodes are.
-    (out / "eval" / "diffusion" / TASK0 / "ood2" / "seed1" / "eval_info.json").unlink()
+    # Resume: nothing finished is redone; an eval whose result is gone and an incomplete training run (its
+    # folder without a checkpoint) are. The DP evaluations stay: the same command remakes the checkpoint.
     calls.clear()
+    assert bench.main(["--out", str(out)]) == 0 and calls == []
+    (out / "eval" / "diffusion" / TASK0 / "ood2" / "seed1" / "eval_info.json").unlink()
     assert bench.main(["--out", str(out)]) == 0
     assert calls == ["lerobot-eval"]
-    info = out / "data" / "select_apple_bcde" / "meta" / "info.json"
-    info.write_text(json.dumps({"total_episodes": 3}))
-    (
-        out
-        / "train"
-        / "diffusion"
-        / TASK0
-        / "checkpoints"
-        / "last"
-        / "pretrained_model"
-        / "model.safetensors"
-    ).unlink()
+    (out / "train" / "diffusion" / TASK0 / CHECKPOINT / "model.safetensors").unlink()
     calls.clear()
     assert bench.main(["--out", str(out)]) == 0
-    assert calls == ["omnid-record", "lerobot-train"]  # evals of DP are reused: their files exist
-    assert "removing the incomplete" in capsys.readouterr().out
+    assert calls == ["lerobot-train"]
+    assert "removing" in capsys.readouterr().out
 
 
 def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
     calls: list[str] = []
-    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {}, fail=("lerobot-train",)))
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {}, fail=("lerobot-train",)))
     assert bench.main(["--out", str(tmp_path), "--settings", "id,ood1"]) == 1
     assert calls == ["omnid-record"] * 3 + ["lerobot-train", "lerobot-train"]
     out = capsys.readouterr().out
@@ -390,7 +381,7 @@ def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
 
 
 def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
+    monkeypatch.setattr(engine, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
     assert bench.main(["--profile", "paper", "--dry-run", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     # One training run per method and task, three ablations, eight few-shot fine-tunes (every method, two
@@ -403,7 +394,7 @@ def test_dry_run_prints_every_command_and_runs_nothing(monkeypatch, tmp_path, ca
 
 def test_ablations_only_with_omnid(monkeypatch, tmp_path, capsys):
     """OmniD's ablations are compared with OmniD: `--methods` without it plans none."""
-    monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
+    monkeypatch.setattr(engine, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
     argv = ["--profile", "paper", "--dry-run", "--out", str(tmp_path), "--tasks", TASK0]
     assert bench.main([*argv, "--methods", "act,vqbet"]) == 0
     out = capsys.readouterr().out
@@ -627,23 +618,61 @@ def test_bad_arguments_are_named(argv, expected, tmp_path, capsys):
     assert not (tmp_path / "b").exists()
 
 
-def test_resumability_checks(tmp_path):
+def test_a_run_is_done_only_when_made_by_the_planned_command(tmp_path):
     runs = build_plan(PROFILES["mini"], tmp_path, (TASK0,))
     named = by_name(runs)
-    record, train = named[f"record/{TASK0}_bcde"], named[f"train/omnid/{TASK0}"]
-    first_eval, offline = named[f"eval/omnid/{TASK0}/id/seed1"], named[f"offline/omnid/{TASK0}/id"]
+    train, offline = named[f"train/omnid/{TASK0}"], named[f"offline/omnid/{TASK0}/id"]
     assert not any(is_done(r) for r in runs)
-    offline.output.mkdir(parents=True)
-    assert not is_done(offline)
+    (offline.output).mkdir(parents=True)
     (offline.output / "offline_eval.json").write_text("{}")
+    assert engine.state(offline) == "stale"  # products, but no stamp: made by whom?
+    engine.write_stamp(offline, "abc", 1.0)
     assert is_done(offline)
-    _write_eval(first_eval.output / "eval_info.json", 0.0, 5)
-    (train.output / "checkpoints" / "last" / "pretrained_model").mkdir(parents=True)
-    assert is_done(first_eval) and not is_done(train)  # a checkpoint folder without weights is unfinished
-    (train.output / "checkpoints" / "last" / "pretrained_model" / "model.safetensors").write_bytes(b"")
-    (record.output / "meta").mkdir(parents=True)
-    (record.output / "meta" / "info.json").write_text(json.dumps({"total_episodes": 49}))
-    assert is_done(train) and not is_done(record)
+    (train.output / CHECKPOINT).mkdir(parents=True)
+    engine.write_stamp(train, "abc", 1.0)
+    assert engine.state(train) == "to run"  # a checkpoint folder without weights is unfinished
+    (train.output / CHECKPOINT / "model.safetensors").write_bytes(b"")
+    assert is_done(train)
+    # The same run planned with another command, or below another dataset, is not the one stamped.
+    other = by_name(build_plan(dataclasses.replace(PROFILES["mini"], steps=3), tmp_path, (TASK0,)))
+    assert engine.state(other[train.name]) == "stale" and engine.state(other[offline.name]) == "stale"
+    other = by_name(build_plan(dataclasses.replace(PROFILES["mini"], episodes=2), tmp_path, (TASK0,)))
+    assert other[train.name].cmd == train.cmd and engine.state(other[train.name]) == "stale"
+
+
+def test_rerun_with_other_options_reruns_what_they_change_and_reports_only_the_new(monkeypatch, tmp_path):
+    """A folder never mixes plans: other training options retrain and re-evaluate (the recordings stay),
+    other evaluation options re-evaluate only, other recording options redo everything downstream."""
+    calls: list[str] = []
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    out = tmp_path / "bench"
+    small = ["--out", str(out), "--settings", "id", "--heldout-episodes", "0"]
+    assert bench.main(small) == 0
+    first = {t: calls.count(t) for t in ("omnid-record", "lerobot-train", "lerobot-eval")}
+    assert first == {"omnid-record": 1, "lerobot-train": 2, "lerobot-eval": 6}
+
+    def rerun(*options: str) -> dict[str, int]:
+        calls.clear()
+        assert bench.main([*small, *options]) == 0
+        return {t: calls.count(t) for t in first}
+
+    assert rerun() == dict.fromkeys(first, 0)
+    # Other image size, steps and evaluation episodes: everything is planned anew and reported anew.
+    assert rerun("--image-size", "48", "--steps", "3", "--eval-episodes", "3") == first
+    evaluations = json.loads((out / "summary.json").read_text())["evaluations"]
+    assert {e["episodes"] for e in evaluations} == {3}
+    # Other evaluation episodes only: the checkpoints stay.
+    assert rerun("--image-size", "48", "--steps", "3", "--eval-episodes", "4") == {
+        "omnid-record": 0,
+        "lerobot-train": 0,
+        "lerobot-eval": 6,
+    }
+    # Other recordings: retrained and re-evaluated from the new data.
+    assert rerun("--image-size", "48", "--steps", "3", "--eval-episodes", "4", "--episodes", "2") == first
+    runs_table = (out / "report.md").read_text().split("## Evaluation runs")[1]
+    assert "/4 (" in runs_table and "/3 (" not in runs_table and "/10 (" not in runs_table
+    evaluations = json.loads((out / "summary.json").read_text())["evaluations"]
+    assert len(evaluations) == 6 and {e["episodes"] for e in evaluations} == {4}
 
 
 TINY = "--episodes 1 --steps 2 --batch-size 2 --image-size 64 --num-workers 0 --eval-episodes 1 "
@@ -800,12 +829,12 @@ def test_ctrl_c_keeps_finished_runs_and_writes_the_report(monkeypatch, tmp_path,
             raise KeyboardInterrupt
         return fake(cmd, log_path, on_line)
 
-    monkeypatch.setattr(bench, "run_logged", interrupt_second_eval)
+    monkeypatch.setattr(engine, "run_logged", interrupt_second_eval)
     assert bench.main(["--out", str(tmp_path)]) == 130
     assert "Interrupted" in capsys.readouterr().out
     assert "| OmniD | 50.0 (23.7-76.3) |" in (tmp_path / "report.md").read_text()
     calls.clear()
-    monkeypatch.setattr(bench, "run_logged", fake)
+    monkeypatch.setattr(engine, "run_logged", fake)
     assert bench.main(["--out", str(tmp_path)]) == 0
     assert (
         calls.count("lerobot-train") == 1
@@ -876,7 +905,7 @@ def test_controls_and_position_bands_in_the_plan(tmp_path):
 
 
 def test_seed_and_control_options(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(bench, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
+    monkeypatch.setattr(engine, "run_logged", lambda *a, **k: pytest.fail("dry run ran a command"))
     argv = ["--dry-run", "--out", str(tmp_path), "--train-seeds", "1000,7", "--control-settings", "none"]
     assert bench.main(argv) == 0
     out = capsys.readouterr().out
@@ -898,7 +927,7 @@ def test_report_only_aggregates_folders_from_two_machines(monkeypatch, tmp_path,
     A with B's results pools both seeds and tests each; the same evaluation twice counts once."""
     calls: list[str] = []
     monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
-    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
     small = ["--settings", "id,ood1", "--heldout-episodes", "0"]
     a, b = tmp_path / "a", tmp_path / "b"
     assert bench.main(["--out", str(a), *small]) == 0
@@ -941,7 +970,7 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
     once, ID / one unseen table / one position band evaluated with 30 episodes and 10 envs at once, the
     controls in ID, no held-out recordings; then its report."""
     calls: list[str] = []
-    monkeypatch.setattr(bench, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
     monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
     runs = by_name(build_plan(PROFILES["gpu8"], tmp_path, (TASK0,)))
     evals = sorted(n for n in runs if n.startswith("eval/"))

@@ -23,7 +23,6 @@ from lerobot.envs.configs import EnvConfig
 from omnid_jobs import Job, job
 from omnid_testing import TINY_POLICY_FLAGS
 
-import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import robustness
 from lerobot_omnid.benchmark.results import CellResult
 from lerobot_omnid.benchmark.robustness_plan import (
@@ -51,6 +50,7 @@ from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.keys import image_key
+from lerobot_omnid.measure import engine
 
 SIZE = 64
 
@@ -332,7 +332,7 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, caps
     omnid = checkpoint_dir(tmp_path / "omnid", "omnid", calibrations)
     dp = checkpoint_dir(tmp_path / "dp", "diffusion", calibrations)
     calls: list[str] = []
-    monkeypatch.setattr(bench, "run_logged", _fake_eval(calls, {"nominal": 80.0, "blind": 0.0}))
+    monkeypatch.setattr(engine, "run_logged", _fake_eval(calls, {"nominal": 80.0, "blind": 0.0}))
     out = tmp_path / "out"
     common = ["--checkpoint", f"omnid={omnid}", "--checkpoint", str(dp), "--out", str(out), "--draws", "2"]
     common += ["--eval-episodes", "5", "--dead-cameras", "cam_b,cam_c"]
@@ -353,8 +353,8 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, caps
     results = json.loads((out / "results.json").read_text())
     nominal = results["checkpoints"]["omnid"]["rows"][0]
     assert nominal["condition"] == "nominal" and nominal["successes"] == 4
-    summary = json.loads((out / "eval" / "omnid" / "nominal" / "seed1" / "run_summary.json").read_text())
-    assert summary["successes"] == 4 and summary["train_seed"] == 1000
+    stamp = json.loads((out / "stamps" / "omnid" / "nominal" / "seed1.json").read_text())
+    assert "lerobot-eval" in stamp["command"] and len(stamp["fingerprint"]) == 16
     assert len(list((out / "calibration" / "omnid").rglob("*.json"))) == 2 * 2 + 2
     # Resumed: nothing runs again; a new level adds only its runs.
     calls.clear()

@@ -13,8 +13,9 @@ with Wilson intervals and Fisher tests), ``<out>/benchmark.png`` and ``<out>/pos
     omnid-benchmark                    # profile mini: select_apple, OmniD vs DP, CPU (1 h on 2 quiet cores)
     omnid-benchmark --profile paper    # every method, task and setting at the paper's sizes (GPU, days)
 
-Resumable: a run whose output is complete (a dataset with all its episodes, a final checkpoint, an
-eval_info.json) is not run again; an incomplete one is deleted and rerun. Each run logs to <out>/logs/.
+Resumable: a run is done when its output is complete and its stamp says it was made by the very command and
+inputs planned now (:mod:`lerobot_omnid.measure.engine`); anything else is deleted and rerun, with everything
+downstream of it, so a folder never mixes plans. Each run logs to <out>/logs/.
 
     omnid-benchmark --report-only --out A --also B docs/results/mini_seed1001.json   # results of 3 folders
 """
@@ -23,31 +24,22 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import shlex
-import shutil
-import subprocess
 import sys
-import time
 from pathlib import Path
 
-from tqdm import tqdm
-
 from lerobot_omnid.benchmark import results
-from lerobot_omnid.benchmark.commands import run_logged
-from lerobot_omnid.benchmark.outputs import eval_entry, settings_markdown, write_outputs
+from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs
 from lerobot_omnid.benchmark.plan import (
     LABELS,
     METHODS,
     PROFILES,
     SETTINGS,
     BenchmarkProfile,
-    Run,
     available_tasks,
     build_plan,
-    is_done,
 )
 from lerobot_omnid.cli import csv_of, int_at_least
+from lerobot_omnid.measure.engine import code_commit, describe_plan, execute, is_done, state
 
 OVERRIDES = {  # option: (profile field, minimum)
     "episodes": ("episodes", 1),
@@ -62,84 +54,6 @@ OVERRIDES = {  # option: (profile field, minimum)
     "image_size": ("image_size", 16),
     "num_workers": ("num_workers", 0),
 }
-
-
-def describe_plan(runs: list[Run]) -> list[str]:
-    lines = []
-    for i, run in enumerate(runs, 1):
-        state = "done" if is_done(run) else "to run"
-        lines += [f"[{i}/{len(runs)}] {run.name} ({state})", "  " + shlex.join(run.cmd)]
-    return lines
-
-
-def clear_incomplete(run: Run, out: Path) -> None:
-    """Remove what an interrupted record or train run left (the tools refuse an existing folder)."""
-    if run.kind in ("record", "train") and run.output.exists():
-        run.output.relative_to(out)  # never delete outside the benchmark's folder
-        tqdm.write(f"{run.name}: removing the incomplete {run.output}")
-        shutil.rmtree(run.output)
-
-
-def code_commit() -> str | None:
-    """The git commit of this package's checkout, ``+dirty`` when tracked files differ from it; None when
-    it is not a git checkout (an installed copy)."""
-    root = Path(__file__).resolve().parents[2]
-
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", *args], cwd=root, capture_output=True, text=True, check=True
-        ).stdout.strip()
-
-    try:
-        commit = git("rev-parse", "HEAD")
-        dirty = git("status", "--porcelain", "--untracked-files=no")
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return commit + ("+dirty" if dirty else "")
-
-
-def execute(
-    runs: list[Run], out: Path, verbose: bool, commit: str | None = None
-) -> tuple[dict[str, str], dict[str, float]]:
-    """Run what is not done yet, in order; a failed run blocks the runs that need its output. A finished
-    evaluation gets its ``run_summary.json`` (counts, ``commit``, command) beside its ``eval_info.json``.
-    Returns each run's status ("reused", "ran", "failed", "blocked") and the seconds of those run."""
-    status, seconds = {}, {}
-    bar = tqdm(runs, desc="benchmark", unit="run", file=sys.stdout, dynamic_ncols=True)
-    for run in bar:
-        bar.set_postfix_str(run.name)
-        if is_done(run):
-            status[run.name] = "reused"
-            continue
-        blocked = [n for n in run.needs if status.get(n) in ("failed", "blocked")]
-        if blocked:
-            status[run.name] = "blocked"
-            tqdm.write(f"{run.name}: skipped, it needs {', '.join(blocked)}")
-            continue
-        clear_incomplete(run, out)
-        log = out / "logs" / (run.name.replace("/", "__") + ".log")
-        last = [0.0]
-
-        def show(line: str, run: Run = run, last: list[float] = last) -> None:
-            if verbose:
-                tqdm.write(line.rstrip())
-            elif time.monotonic() - last[0] > 1.0 and line.strip():
-                last[0] = time.monotonic()
-                bar.set_postfix_str(f"{run.name}: {line.strip()[-60:]}")
-
-        start = time.perf_counter()
-        returncode = run_logged(run.cmd, log, on_line=show)
-        seconds[run.name] = time.perf_counter() - start
-        if returncode == 0 and is_done(run):
-            status[run.name] = "ran"
-            if run.kind == "eval":
-                record = results.record_of(eval_entry(run), commit)
-                (run.output / results.RUN_SUMMARY).write_text(json.dumps(record.to_json(), indent=2) + "\n")
-            tqdm.write(f"{run.name}: done in {seconds[run.name]:.0f} s")
-        else:
-            status[run.name] = "failed"
-            tqdm.write(f"{run.name}: FAILED (exit code {returncode}, output incomplete); log: {log}")
-    return status, seconds
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -238,12 +152,16 @@ def main(argv: list[str] | None = None) -> int:
     kinds = {k: sum(r.kind == k for r in runs) for k in kinds}
     per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
     todo = sum(not is_done(r) for r in runs)
-    print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run; {out}")
+    stale = sum(state(r) == "stale" for r in runs)
+    redo = f" ({stale} made for another plan: rerun)" if stale else ""
+    print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}; {out}")
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return 0
     try:
-        status, seconds = ({}, {}) if args.report_only else execute(runs, out, args.verbose, commit)
+        status, seconds = (
+            ({}, {}) if args.report_only else execute(runs, out, args.verbose, commit, "benchmark")
+        )
     except KeyboardInterrupt:
         write_outputs(p, tasks, runs, out, args.also, commit, command)
         print(f"\nInterrupted: finished runs are kept, the one in progress is redone next time; {out}")

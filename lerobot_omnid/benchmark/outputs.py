@@ -33,7 +33,6 @@ from lerobot_omnid.benchmark.plan import (
     TASK1,
     VQBET_CAMERA,
     BenchmarkProfile,
-    Run,
     ablation_flags,
     control_flags,
     control_setting,
@@ -44,6 +43,7 @@ from lerobot_omnid.benchmark.plan import (
     seed_folder,
 )
 from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference
+from lerobot_omnid.measure.engine import Run, is_done, stamp_commit
 
 BANDS_CM = {band: (100 * low, 100 * high) for band, (low, high) in POSITION_BANDS.items()}
 """The graded position bands: distance outside the training square, cm."""
@@ -119,8 +119,15 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
 
 
 def eval_entry(run: Run) -> results.EvalEntry:
+    """A finished evaluation run as the cell it fills, with the commit of its stamp."""
     return results.EvalEntry(
-        run.result, run.seed, run.output / "eval_info.json", run.train_seed, run.control, run.cmd
+        run.result,
+        run.seed,
+        run.output / "eval_info.json",
+        run.train_seed,
+        run.control,
+        run.cmd,
+        stamp_commit(run),
     )
 
 
@@ -203,7 +210,7 @@ def write_outputs(
     """summary.json (this folder's evaluations), then report.md, benchmark.png, position_curve.png and
     results.json from them and from the summaries of ``also`` (other folders or summary files)."""
     entries = [eval_entry(r) for r in runs if r.kind == "eval"]
-    own = [record for e in entries if (record := results.record_of(e)) is not None]
+    own = [results.record_of(eval_entry(r)) for r in runs if r.kind == "eval" and is_done(r)]
     out.mkdir(parents=True, exist_ok=True)
     results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
     groups = [own]
@@ -218,7 +225,7 @@ def write_outputs(
     offline = {
         r.result: r.output / OFFLINE_OUTPUT
         for r in runs
-        if r.kind == "offline" and r.train_seed == first_seed
+        if r.kind == "offline" and r.train_seed == first_seed and is_done(r)
     }
     chart = charts.bar_chart(
         cells, methods, tasks, TASK0, TASK1, BACKGROUND_OODS, LABELS, out / "benchmark.png"

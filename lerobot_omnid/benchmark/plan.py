@@ -27,14 +27,12 @@ from lerobot_omnid.benchmark.commands import (
     SIM_VOLUME_BOUNDS,
     control_calibration_command,
     eval_command,
-    is_evaluated,
-    is_trained,
     json_list,
     record_command,
-    recorded_episodes,
     train_command,
 )
 from lerobot_omnid.benchmark.commands import CHECKPOINT as CHECKPOINT_SUBDIR
+from lerobot_omnid.measure.engine import Run, plan
 
 METHODS = ("omnid", "diffusion", "act", "vqbet")
 """LeRobot policy types, in the order of the paper's tables."""
@@ -396,41 +394,6 @@ def seed_folder(out: Path, train_seed: int) -> tuple[Path, str]:
     return out / f"train_seed{train_seed}", f"train_seed{train_seed}/"
 
 
-@dataclass(frozen=True)
-class Run:
-    """One command of the plan. ``name`` is unique (and names the log); ``needs`` lists runs whose output
-    this one reads; an eval run carries ``result`` = (model, task, setting), its eval ``seed``, the
-    ``train_seed`` of its model and its ``control`` ("" for the checkpoint as trained), an offline run
-    (open-loop action error on held-out expert episodes, ``omnid-offline-eval``) its ``result`` and
-    ``train_seed``. A "calibration" run writes a control's calibration file (``output``)."""
-
-    name: str
-    kind: str  # "record" | "train" | "eval" | "prepare" | "calibration" | "offline"
-    cmd: tuple[str, ...]
-    output: Path
-    needs: tuple[str, ...] = ()
-    episodes: int = 0
-    result: tuple[str, str, str] | None = None
-    seed: int | None = None
-    train_seed: int = TRAIN_SEED
-    control: str = ""
-
-
-def is_done(run: Run) -> bool:
-    """Whether ``run``'s output is complete (then it is not run again)."""
-    if run.kind == "record":
-        return recorded_episodes(run.output) >= run.episodes
-    if run.kind == "train":
-        return is_trained(run.output)
-    if run.kind == "prepare":
-        return (run.output / "config.json").is_file()
-    if run.kind == "calibration":
-        return run.output.is_file()
-    if run.kind == "offline":
-        return (run.output / OFFLINE_OUTPUT).is_file()
-    return is_evaluated(run.output)
-
-
 def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run]:
     """Every run of the benchmark: the recordings, then per training seed (:func:`seed_folder`) the training
     runs, each model's evaluations right after its training (so results come early), its controls and its
@@ -458,7 +421,7 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
         )
     for train_seed in p.train_seeds:
         runs += plan_models(p, out, tasks, train_seed, fewshot_tasks)
-    return runs
+    return plan(runs, out)
 
 
 def heldout_settings(p: BenchmarkProfile, tasks: Sequence[str]) -> tuple[str, ...]:

@@ -2,9 +2,9 @@
 from its ``eval_info.json`` or from a benchmark folder's ``summary.json``, merged across folders (runs made
 on other machines) and pooled per table cell.
 
-A finished evaluation leaves ``run_summary.json`` beside its ``eval_info.json`` (which cell, seeds, counts,
-the code commit and the command); a benchmark folder's ``summary.json`` holds every evaluation of that
-folder, so that copying it (under ``docs/results/``) is enough to combine results from several machines.
+A finished evaluation's counts come from its ``eval_info.json``, its commit and command from the engine's
+stamp of the run; a benchmark folder's ``summary.json`` holds every evaluation of that folder, so that
+copying it (under ``docs/results/``) is enough to combine results from several machines.
 """
 
 from __future__ import annotations
@@ -21,8 +21,6 @@ Key = tuple[str, str, str]
 """(model, task, setting): a table cell. model: a method, an ablation or a method whose fine-tuned model
 the cell holds; setting: "id", "position_ood", "position_band_k", "ood1".."ood4" or "fewshot_a"."""
 
-RUN_SUMMARY = "run_summary.json"
-"""Written beside a finished evaluation's ``eval_info.json``: :meth:`EvalRecord.to_json` of it."""
 SUMMARY = "summary.json"
 """A benchmark folder's evaluations, profile, commit and command (:func:`write_summary`)."""
 SUMMARY_FORMAT = 1
@@ -33,8 +31,8 @@ experiment; methods, tasks, settings, training and eval seeds and episodes per e
 
 @dataclass(frozen=True)
 class EvalEntry:
-    """A planned evaluation: its cell, eval ``seed``, ``eval_info.json`` (which may not exist yet), the
-    training seed of its model, its control ("" for the checkpoint as trained) and its command."""
+    """A finished evaluation of the plan: its cell, eval ``seed``, ``eval_info.json``, the training seed of
+    its model, its control ("" for the checkpoint as trained), its command and the commit that ran it."""
 
     key: Key
     seed: int | None
@@ -42,6 +40,7 @@ class EvalEntry:
     train_seed: int | None = None
     control: str = ""
     command: tuple[str, ...] = ()
+    commit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -131,16 +130,9 @@ def read_eval_info(path: Path) -> tuple[int, int]:
     return round(float(overall["pc_success"]) * episodes / 100.0), episodes
 
 
-def record_of(entry: EvalEntry, commit: str | None = None) -> EvalRecord | None:
-    """The record of a finished planned evaluation (None if not finished): counts from its
-    ``eval_info.json``, commit and command from its ``run_summary.json`` where it has one, else ``commit``
-    and the planned command."""
-    if not entry.path.is_file():
-        return None
+def record_of(entry: EvalEntry) -> EvalRecord:
+    """The record of a finished evaluation: its counts from its ``eval_info.json``."""
     successes, episodes = read_eval_info(entry.path)
-    summary_path = entry.path.with_name(RUN_SUMMARY)
-    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-    command = tuple(summary.get("command", entry.command))
     return EvalRecord(
         entry.key,
         entry.control,
@@ -149,8 +141,8 @@ def record_of(entry: EvalEntry, commit: str | None = None) -> EvalRecord | None:
         successes,
         episodes,
         str(entry.path),
-        summary.get("commit", commit),
-        command,
+        entry.commit,
+        entry.command,
     )
 
 

@@ -15,8 +15,8 @@ in one task's ID setting with the same env seeds throughout:
 
 Writes ``<out>/report.md`` (a table per checkpoint: Wilson intervals, share of the rate as trained, Fisher
 tests; a table across checkpoints), ``<out>/robustness_<label>.png`` (success against the perturbation
-beside the controls' bands) and ``<out>/results.json``. Resumable: a finished evaluation (its
-``eval_info.json``) is not run again.
+beside the controls' bands) and ``<out>/results.json``. Resumable: an evaluation made by the same command
+from the same checkpoint and calibration file is not run again (:mod:`lerobot_omnid.measure.engine`).
 
     omnid-robustness --checkpoint omnid=<pretrained_model> --checkpoint dp=<pretrained_model> --dry-run
     MUJOCO_GL=egl omnid-robustness --checkpoint omnid=<pretrained_model> --out outputs/robustness
@@ -35,9 +35,8 @@ from typing import Any
 
 from gym_omnid.constants import CAMERAS, MAX_EPISODE_STEPS, TASKS
 
-from lerobot_omnid.benchmark.benchmark import code_commit, describe_plan, execute
 from lerobot_omnid.benchmark.control_calibration import control_calibrations
-from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, TASK0, is_done
+from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, TASK0
 from lerobot_omnid.benchmark.results import read_eval_info
 from lerobot_omnid.benchmark.robustness_plan import (
     CONTROLS,
@@ -68,6 +67,7 @@ from lerobot_omnid.benchmark.robustness_report import (
 )
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.cli import csv_of, int_at_least
+from lerobot_omnid.measure.engine import code_commit, describe_plan, execute, is_done
 
 COMPARISON_CHART = "robustness_comparison.png"
 """The checkpoints' curves side by side (written when more than one has results)."""
@@ -222,13 +222,15 @@ def write_calibration_files(
 def cell_counts(
     checkpoint: Checkpoint, settings: RobustnessSettings, out: Path
 ) -> dict[Cell, dict[int, tuple[int, int]]]:
-    """(successes, episodes) per finished cell of ``checkpoint`` and eval seed."""
+    """(successes, episodes) per cell of ``checkpoint`` and eval seed, of the evaluations done for this
+    very plan (:func:`lerobot_omnid.measure.engine.is_done`)."""
+    done = {run.output for run in build_runs([checkpoint], settings, out) if is_done(run)}
     counts = {}
     for cell in plan_cells(checkpoint, settings):
         found = {
-            k: read_eval_info(path)
+            k: read_eval_info(folder / "eval_info.json")
             for k in settings.eval_seeds
-            if (path := eval_dir(out, checkpoint, cell, k) / "eval_info.json").is_file()
+            if (folder := eval_dir(out, checkpoint, cell, k)) in done
         }
         if found:
             counts[cell] = found
@@ -335,6 +337,10 @@ def main(argv: list[str] | None = None) -> int:
     folder_settings = check_settings(parser, out, settings, checkpoints)
     try:
         runs = build_runs(checkpoints, settings, out)
+        if not (args.dry_run or args.report_only):  # their contents are the runs' inputs: plan again
+            files = sum(write_calibration_files(c, config, settings, out) for c, config in loaded)
+            print(f"calibration files: {files} under {out / 'calibration'}")
+            runs = build_runs(checkpoints, settings, out)
     except ValueError as e:
         parser.error(str(e))
     command = " ".join(["omnid-robustness", *(sys.argv[1:] if argv is None else argv)])
@@ -355,10 +361,8 @@ def main(argv: list[str] | None = None) -> int:
     status: dict[str, str] = {}
     seconds: dict[str, float] = {}
     if not args.report_only:
-        files = sum(write_calibration_files(c, config, settings, out) for c, config in loaded)
-        print(f"calibration files: {files} under {out / 'calibration'}")
         try:
-            status, seconds = execute(runs, out, args.verbose, commit)
+            status, seconds = execute(runs, out, args.verbose, commit, "robustness")
         except KeyboardInterrupt:
             write_outputs(checkpoints, settings, out, commit, command)
             print(

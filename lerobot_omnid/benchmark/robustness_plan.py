@@ -30,10 +30,11 @@ import torch
 from gym_omnid.constants import CAMERAS
 
 from lerobot_omnid.benchmark.commands import eval_command, json_list
-from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, Run, control_flags
+from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, control_flags
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.geometry import axis_angle_to_matrix, perturb_extrinsics, random_unit_vectors
 from lerobot_omnid.keys import image_key
+from lerobot_omnid.measure.engine import Run, plan
 
 LEVELS = (0.0, 0.5, 1.0, 2.0, 4.0)
 """Perturbation levels: cm of translation and degrees of rotation together."""
@@ -282,15 +283,22 @@ def build_runs(checkpoints: Sequence[Checkpoint], settings: RobustnessSettings, 
                 )
                 result = (checkpoint.label, settings.task, cell.name)
                 name = f"{checkpoint.label}/{cell.name}/seed{k}"
+                calibration = calibration_file(out, checkpoint, cell)
+                inputs = (
+                    checkpoint.path / "model.safetensors",
+                    checkpoint.path / "config.json",
+                    *((calibration,) if calibration else ()),
+                )
                 runs.append(
                     Run(
                         name,
                         "eval",
                         tuple(cmd),
                         output,
+                        inputs=inputs,
                         result=result,
                         seed=k,
                         train_seed=checkpoint.train_seed,
                     )
                 )
-    return runs
+    return plan(runs, out)

@@ -1,0 +1,280 @@
+"""The experiment engine: every protocol is a list of runs (:class:`Run`), and this module plans, runs,
+resumes and stamps them.
+
+A run is one real console command (``omnid-record``, ``lerobot-train``, ``lerobot-eval``, ...) with the
+folder or file it writes, the runs whose outputs it reads, and, for an evaluation, the table cell it fills.
+Its *fingerprint* hashes its command line, the fingerprints of the runs it needs and the contents of the
+files it reads that no run of the plan makes (a checkpoint trained elsewhere, a calibration file the
+protocol writes), so it changes when anything upstream is asked for, or is, different. A run is done only
+when its products exist *and* its stamp (``<out>/stamps/<name>.json``, written when the command succeeds)
+carries the fingerprint asked for now: rerunning a campaign with other options reruns exactly the runs
+they change, and everything downstream, and never reports results made for another plan.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+STAMPS = "stamps"
+"""Folder of the stamps under a campaign's output folder."""
+LOGS = "logs"
+CHECKPOINT = Path("checkpoints") / "last" / "pretrained_model"
+"""Where ``lerobot-train`` leaves its final model, inside its ``--output_dir``."""
+PRODUCTS: dict[str, tuple[str, ...]] = {
+    "record": ("meta/info.json",),
+    "merge": ("meta/info.json",),
+    "train": (str(CHECKPOINT / "model.safetensors"),),
+    "prepare": ("config.json",),
+    "eval": ("eval_info.json",),
+    "offline": ("offline_eval.json",),
+    "calibration": ("",),  # the output is the file itself
+}
+"""What each kind of run leaves in its output (paths relative to it) when it finished."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """One command of a plan.
+
+    Attributes:
+        name: unique in the plan; names its log and its stamp.
+        kind: one of :data:`PRODUCTS`' keys: what the command makes.
+        cmd: the command line, as a user would paste it.
+        output: the folder (or, for "calibration", the file) the command writes.
+        needs: names of the runs whose outputs this one reads (earlier in the plan).
+        episodes: a "record" run's episodes.
+        result: an evaluation's table cell (model, task, setting), with its eval ``seed``, the
+            ``train_seed`` of its model and its ``control`` ("" for the checkpoint as trained).
+        inputs: files the command reads that no run of the plan makes.
+        fingerprint, stamp: set by :func:`plan`.
+    """
+
+    name: str
+    kind: str
+    cmd: tuple[str, ...]
+    output: Path
+    needs: tuple[str, ...] = ()
+    episodes: int = 0
+    result: tuple[str, str, str] | None = None
+    seed: int | None = None
+    train_seed: int | None = None
+    control: str = ""
+    inputs: tuple[Path, ...] = ()
+    fingerprint: str = ""
+    stamp: Path | None = None
+
+
+WHOLE_FILE_BYTES = 8 << 20
+"""Files up to this size are hashed whole; of larger ones (weights), the size and the first and last MiB."""
+
+
+def file_fingerprint(path: Path) -> str:
+    """A hash of a file's contents ("missing" when there is none); independent of its time stamps, so a
+    copied checkpoint keeps its fingerprint."""
+    if not path.is_file():
+        return "missing"
+    digest = hashlib.sha256()
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        if size <= WHOLE_FILE_BYTES:
+            digest.update(f.read())
+        else:
+            digest.update(str(size).encode())
+            digest.update(f.read(1 << 20))
+            f.seek(-(1 << 20), 2)
+            digest.update(f.read())
+    return digest.hexdigest()[:16]
+
+
+def plan(runs: Sequence[Run], out: Path) -> list[Run]:
+    """Check a protocol's runs (unique names, known kinds, needs listed before) and give each its
+    fingerprint and stamp path under ``out``."""
+    fingerprints: dict[str, str] = {}
+    files: dict[Path, str] = {}
+    planned = []
+    for run in runs:
+        if run.name in fingerprints:
+            raise ValueError(f"plan: two runs are named {run.name!r}")
+        if run.kind not in PRODUCTS:
+            raise ValueError(f"plan: {run.name}: kind {run.kind!r} is not one of {sorted(PRODUCTS)}")
+        unknown = [n for n in run.needs if n not in fingerprints]
+        if unknown:
+            raise ValueError(f"plan: {run.name} needs {unknown}, which are not planned before it")
+        inputs = [files.setdefault(path, file_fingerprint(path)) for path in run.inputs]
+        content = json.dumps([list(run.cmd), [fingerprints[n] for n in run.needs], inputs])
+        fingerprints[run.name] = hashlib.sha256(content.encode()).hexdigest()[:16]
+        stamp = out / STAMPS / f"{run.name}.json"
+        planned.append(replace(run, fingerprint=fingerprints[run.name], stamp=stamp))
+    return planned
+
+
+def read_stamp(run: Run) -> dict[str, Any] | None:
+    """What the stamp of ``run`` says (fingerprint, command, commit, seconds), or None without one."""
+    if run.stamp is None or not run.stamp.is_file():
+        return None
+    return json.loads(run.stamp.read_text())
+
+
+def has_products(run: Run) -> bool:
+    return all((run.output / p if p else run.output).exists() for p in PRODUCTS[run.kind])
+
+
+def state(run: Run) -> str:
+    """ "done" (products there, made by this very command and inputs), "stale" (products there, made for
+    another plan or before stamps existed) or "to run"."""
+    if not has_products(run):
+        return "to run"
+    stamp = read_stamp(run)
+    if stamp is not None and stamp.get("fingerprint") == run.fingerprint and run.fingerprint:
+        return "done"
+    return "stale"
+
+
+def is_done(run: Run) -> bool:
+    return state(run) == "done"
+
+
+def describe_plan(runs: Sequence[Run]) -> list[str]:
+    """Every run with its state and its command line (``--dry-run``)."""
+    lines = []
+    for i, run in enumerate(runs, 1):
+        lines += [f"[{i}/{len(runs)}] {run.name} ({state(run)})", "  " + shlex.join(run.cmd)]
+    return lines
+
+
+def code_commit() -> str | None:
+    """The git commit of this package's checkout, ``+dirty`` when tracked files differ from it; None when
+    it is not a git checkout (an installed copy)."""
+    root = Path(__file__).resolve().parents[2]
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no")
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return commit + ("+dirty" if dirty else "")
+
+
+def run_logged(cmd: Sequence[str], log_path: Path, on_line: Callable[[str], object] | None = None) -> int:
+    """Run ``cmd``, writing the command and its output (stdout and stderr) to ``log_path``; each line is
+    also passed to ``on_line``. Returns the exit code."""
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    with (
+        open(log_path, "w") as log,
+        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1) as proc,
+    ):
+        log.write(shlex.join(cmd) + "\n")
+        for line in proc.stdout:
+            log.write(line)
+            if on_line is not None:
+                on_line(line)
+    return proc.returncode
+
+
+def clear_output(run: Run, out: Path) -> None:
+    """Remove what an interrupted or stale run left (the tools refuse an existing dataset or training
+    folder, and a stale evaluation's files must not survive into the new one); only inside ``out``."""
+    if run.stamp is not None:
+        run.stamp.unlink(missing_ok=True)
+    if not run.output.exists():
+        return
+    run.output.resolve().relative_to(out.resolve())  # never delete outside the campaign's folder
+    tqdm.write(f"{run.name}: removing {run.output} ({'stale' if has_products(run) else 'incomplete'})")
+    if run.output.is_dir():
+        shutil.rmtree(run.output)
+    else:
+        run.output.unlink()
+
+
+def execute(
+    runs: Sequence[Run],
+    out: Path,
+    verbose: bool = False,
+    commit: str | None = None,
+    desc: str = "runs",
+    on_done: Callable[[Run], object] | None = None,
+    stop_on_failure: bool = False,
+) -> tuple[dict[str, str], dict[str, float]]:
+    """Run, in order, every run that is not done; a failed run blocks the runs that need its output.
+
+    A run that succeeds gets its stamp (fingerprint, command, ``commit``, seconds), then ``on_done(run)``
+    (e.g. a protocol's run summary). ``stop_on_failure`` exits at the first failure, naming its log.
+    Returns each run's status ("reused", "ran", "failed", "blocked") and the seconds of those run.
+    """
+    status: dict[str, str] = {}
+    seconds: dict[str, float] = {}
+    bar = tqdm(runs, desc=desc, unit="run", file=sys.stdout, dynamic_ncols=True)
+    for run in bar:
+        bar.set_postfix_str(run.name)
+        if is_done(run):
+            status[run.name] = "reused"
+            continue
+        blocked = [n for n in run.needs if status.get(n) in ("failed", "blocked")]
+        if blocked:
+            status[run.name] = "blocked"
+            tqdm.write(f"{run.name}: skipped, it needs {', '.join(blocked)}")
+            continue
+        clear_output(run, out)
+        log = out / LOGS / f"{run.name.replace('/', '__')}.log"
+        last = [0.0]
+
+        def show(line: str, run: Run = run, last: list[float] = last) -> None:
+            if verbose:
+                tqdm.write(line.rstrip())
+            elif time.monotonic() - last[0] > 1.0 and line.strip():
+                last[0] = time.monotonic()
+                bar.set_postfix_str(f"{run.name}: {line.strip()[-60:]}")
+
+        start = time.perf_counter()
+        returncode = run_logged(run.cmd, log, on_line=show)
+        seconds[run.name] = time.perf_counter() - start
+        if returncode == 0 and has_products(run):
+            write_stamp(run, commit, seconds[run.name])
+            status[run.name] = "ran"
+            if on_done is not None:
+                on_done(run)
+            tqdm.write(f"{run.name}: done in {seconds[run.name]:.0f} s")
+            continue
+        status[run.name] = "failed"
+        message = f"{run.name}: FAILED (exit code {returncode}, output incomplete); log: {log}"
+        if stop_on_failure:
+            raise SystemExit(message)
+        tqdm.write(message)
+    return status, seconds
+
+
+def write_stamp(run: Run, commit: str | None, seconds: float) -> None:
+    if run.stamp is None:
+        raise RuntimeError(f"{run.name}: not planned (engine.plan gives runs their stamps)")
+    run.stamp.parent.mkdir(parents=True, exist_ok=True)
+    stamp = {
+        "name": run.name,
+        "fingerprint": run.fingerprint,
+        "command": shlex.join(run.cmd),
+        "commit": commit,
+        "seconds": round(seconds, 1),
+    }
+    run.stamp.write_text(json.dumps(stamp, indent=2) + "\n")
+
+
+def stamp_commit(run: Run) -> str | None:
+    """The commit the code had when ``run`` was made (its stamp's), or None."""
+    stamp = read_stamp(run)
+    return stamp.get("commit") if stamp else None
