@@ -1,20 +1,15 @@
-"""``benchmarks/readout_selection.py`` (issue 18's readout protocol): the candidates differ only in their
-readout, validation never touches a test or training seed, the rule picks as written, the test phase only
-evaluates the selected readout and the paper's, and the resumable runner (``commands.run_steps``) reruns
-only what is unfinished."""
+"""The readout-selection protocol: the candidates differ only in their readout, validation never touches a
+test or training seed, the rule picks as written, the test phase only evaluates the selected readout and
+the paper's, and the report reads only runs made for the plan."""
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
-from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark import readout_selection as rs
 from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, HELDOUT_SEED, PROFILES
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-import readout_selection as rs
 
 OUT, DATA = Path("out"), Path("data")
 
@@ -50,7 +45,7 @@ def test_validation_seeds_are_disjoint_from_training_test_and_other_recordings()
     cmd = options(rs.evaluate(OUT, "validation", "bev_conv", "id", "cpu"))
     assert cmd["--seed"] == str(rs.VALIDATION_SEED) and cmd["--eval.n_episodes"] == "20"
     assert cmd["--env.layout"] == "id" and cmd["--env.background"] == "id"
-    record_cmd = rs.validation_steps(OUT, DATA, "cpu")[0][1]
+    record_cmd = rs.validation_runs(OUT, DATA, "cpu", record_data=False)[0].cmd
     assert record_cmd[record_cmd.index("--seed") + 1] == str(rs.VALIDATION_HELDOUT_SEED)
 
 
@@ -73,17 +68,17 @@ def test_selection_rule(results, expected):
 
 
 def test_test_phase_evaluates_only_the_selected_readout_and_the_papers():
-    steps = rs.test_steps(OUT, "latent_queries", "cpu")
-    readouts = {name.split("/")[2] for name, _, _ in steps if name.startswith("eval/")}
+    runs = rs.test_runs(OUT, "latent_queries", "cpu")
+    readouts = {run.name.split("/")[2] for run in runs if run.kind == "eval"}
     assert readouts == {"latent_queries", "flatten"}
-    evals = [options(cmd) for name, cmd, _ in steps if name.startswith("eval/")]
+    evals = [options(run.cmd) for run in runs if run.kind == "eval"]
     assert {e["--seed"] for e in evals} == {str(rs.TEST_SEED)} and {
         e["--eval.n_episodes"] for e in evals
     } == {"30"}
     assert len(evals) == 2 * (len(rs.TEST_SETTINGS) + 1)
     blind = [e for e in evals if "--policy.calibration_path" in e]
     assert len(blind) == 2 and all(e["--policy.calibration_path"].endswith("blind.json") for e in blind)
-    assert len(rs.test_steps(OUT, "flatten", "cpu")) == len(steps) // 2  # flatten selected: once
+    assert len(rs.test_runs(OUT, "flatten", "cpu")) == len(runs) // 2  # flatten selected: once
 
 
 def write_eval(folder: Path, successes: int, episodes: int) -> None:
@@ -101,7 +96,9 @@ def test_report_tables_the_validation_and_tests_selected_against_flatten(tmp_pat
     (tmp_path / rs.SELECTION_FILE).write_text(json.dumps({"selected": "bev_conv"}))
     write_eval(rs.eval_dir(tmp_path, "test", "bev_conv", "id"), 7, 30)
     write_eval(rs.eval_dir(tmp_path, "test", "flatten", "id"), 4, 30)
-    summary = rs.report(tmp_path)
+    done = {rs.eval_dir(tmp_path, phase, r, "id") for phase in ("validation", "test") for r in PLANE_READOUTS}
+    done = {folder for folder in done if folder.is_dir()} | {tmp_path / "offline" / r for r in PLANE_READOUTS}
+    summary = rs.report(tmp_path, done)
     assert summary["validation"]["results"]["bev_conv"]["successes"] == 11
     text = (tmp_path / "report.md").read_text()
     assert "| bev_conv | 11/20 (34.2-74.2 %) | 0.70 | 0.020 | **yes** |" in text
@@ -110,33 +107,21 @@ def test_report_tables_the_validation_and_tests_selected_against_flatten(tmp_pat
     assert "| ood1 | - | - |  |" in text
 
 
-def script(code: str) -> list[str]:
-    return [sys.executable, "-c", code]
+def test_report_leaves_out_runs_not_made_for_the_plan(tmp_path):
+    write_eval(rs.eval_dir(tmp_path, "validation", "flatten", "id"), 2, 20)
+    offline = tmp_path / "offline" / "flatten" / rs.OFFLINE_OUTPUT
+    offline.parent.mkdir(parents=True)
+    offline.write_text(json.dumps({"position_cm": 1.5, "gripper": 0.02}))
+    assert rs.report(tmp_path, set())["validation"]["results"] == {}
 
 
-def test_run_steps_reruns_only_the_unfinished_and_names_a_failure(tmp_path):
-    done, unfinished, failing = tmp_path / "done", tmp_path / "unfinished", tmp_path / "failing"
-    write_eval(done, 1, 1)
-    unfinished.mkdir()
-    (unfinished / "stale.txt").write_text("left by an interrupted run")
-    write = "import json, pathlib, sys; p = pathlib.Path(sys.argv[1]); p.mkdir(parents=True, exist_ok=True); "
-    write += "(p / 'eval_info.json').write_text(json.dumps({'overall': {'pc_success': 0, 'n_episodes': 1}}))"
-    steps = [
-        ("eval/done", [*script("raise SystemExit(3)")], done),
-        ("eval/unfinished", [*script(write), str(unfinished)], unfinished),
-    ]
-    commands.run_steps(steps, tmp_path, "test", lambda kind, target: commands.is_evaluated(target), "abc")
-    assert not (unfinished / "stale.txt").exists() and commands.is_evaluated(unfinished)
-    assert (unfinished / commands.COMMIT_FILE).read_text() == "abc\n"
-    assert not (done / commands.COMMIT_FILE).exists()  # not run again
-    with pytest.raises(SystemExit, match=r"eval/failing failed \(exit code 3\); see .*eval__failing\.log"):
-        commands.run_steps(
-            [("eval/failing", script("raise SystemExit(3)"), failing)],
-            tmp_path,
-            "test",
-            lambda kind, target: False,
-            None,
-        )
+def test_dry_run_plans_validation_then_test_once_selected(tmp_path, capsys):
+    rs.main(["--out", str(tmp_path), "--dry-run"])
+    planned = capsys.readouterr().out
+    assert planned.count("lerobot-train") == len(PLANE_READOUTS) and "eval/test/" not in planned
+    (tmp_path / rs.SELECTION_FILE).write_text(json.dumps({"selected": "keypoints"}))
+    rs.main(["--out", str(tmp_path), "--test", "--dry-run"])
+    assert "eval/test/keypoints/id_blind" in capsys.readouterr().out
 
 
 def test_data_of_another_size_is_refused(tmp_path, capsys):

@@ -4,9 +4,10 @@ layout with every camera turned away in its calibration (the same checkpoint and
 state can drive it), and write a markdown report: each success rate with its Wilson 95 % interval and the
 margin over the blind control with Newcombe's interval and a two-sided Fisher test.
 
-Every stage is a real console command (`omnid-record`, `lerobot-train`, `lerobot-eval`), run as a
-subprocess whose output goes to the terminal and to ``<out>/logs/<stage>.log``; the commands are
-written into the report so that each can be rerun by hand. A stage whose result exists is not redone.
+Every stage is a real console command (`omnid-record`, `lerobot-train`, `lerobot-eval`), run by the
+experiment engine (:mod:`lerobot_omnid.measure.engine`) as a subprocess whose output goes to the terminal
+and to ``<out>/logs/<stage>.log``; the commands are written into the report so that each can be rerun by
+hand. A stage made by the same command from the same inputs is not redone; one made with other options is.
 
     omnid-demo                       # CPU budget: about 30 minutes on 2 cores
     omnid-demo --profile gpu --device cuda
@@ -15,12 +16,10 @@ written into the report so that each can be rerun by hand. A stage whose result 
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS
-from tqdm import tqdm
 
 from lerobot_omnid.benchmark.commands import (
     CHECKPOINT,
@@ -28,18 +27,15 @@ from lerobot_omnid.benchmark.commands import (
     control_calibration_command,
     env_cameras,
     eval_command,
-    is_evaluated,
-    is_trained,
     json_list,
     record_command,
-    recorded_episodes,
-    run_stage,
 )
 from lerobot_omnid.benchmark.commands import train_command as train_command_base
 from lerobot_omnid.benchmark.plan import MINI, BenchmarkProfile, control_flags, method_flags
 from lerobot_omnid.benchmark.results import read_eval_info
 from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference, wilson_interval
 from lerobot_omnid.cli import positive_int
+from lerobot_omnid.measure.engine import Run, code_commit, execute, plan
 
 EVAL_BATCH_SIZE = 5  # envs each lerobot-eval runs at once (1.78x faster than one, same env seeds)
 BLIND = "id_blind"  # the ID evaluation under the blind control
@@ -205,7 +201,6 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     out = args.out.resolve()
-    logs = out / "logs"
     dataset = out / "data" / "select_apple_bcde"
     train_dir = out / "train"
     checkpoint = train_dir / CHECKPOINT
@@ -239,20 +234,24 @@ def main(argv: list[str] | None = None) -> int:
             for name, (layout, extra) in evaluations.items()
         },
     }
-    done = {
-        "record": recorded_episodes(dataset) > 0,
-        "train": is_trained(train_dir),
-        "blind_calibration": blind_file.is_file(),
-        **{f"eval_{name}": is_evaluated(out / f"eval_{name}") for name in evaluations},
+    # name: (kind, output, needs); the evaluations write their own folder.
+    stages = {
+        "record": ("record", dataset, ()),
+        "train": ("train", train_dir, ("record",)),
+        "blind_calibration": ("calibration", blind_file, ("train",)),
+        **{f"eval_{name}": ("eval", out / f"eval_{name}", ("train",)) for name in evaluations},
     }
-    timings = {}
-    stages = tqdm(commands.items(), desc="OmniD main job", unit="stage", file=sys.stdout)
-    for name, cmd in stages:
-        stages.set_postfix_str(name)
-        if done[name]:
-            print(f"[{name}] already done, reusing its result")
-            continue
-        timings[name] = run_stage(name, cmd, logs)
+    stages[f"eval_{BLIND}"] = ("eval", out / f"eval_{BLIND}", ("train", "blind_calibration"))
+    runs = []
+    for name, cmd in commands.items():
+        kind, output, needs = stages[name]
+        runs.append(Run(name, kind, tuple(cmd), output, needs))
+    runs = plan(runs, out)
+    status, timings = execute(
+        runs, out, verbose=True, commit=code_commit(), desc="OmniD main job", stop_on_failure=True
+    )
+    for name in (n for n, s in status.items() if s == "reused"):
+        print(f"[{name}] already done (same command and inputs), reusing its result")
     rows = [
         (name, read_eval_info(out / f"eval_{name}" / "eval_info.json"), out / f"eval_{name}")
         for name in evaluations

@@ -1,7 +1,6 @@
 """Choosing OmniD's plane readout on validation data, then testing only the choice against the paper's.
 
-The protocol (issue 18; docs/benchmark.md#choosing-the-readout), fixed in the commit that added this script,
-before any of its runs:
+The protocol (docs/benchmark.md#choosing-the-readout), fixed before any of its runs:
 
 1. *Candidates*: every readout of ``PLANE_READOUTS``, each an OmniD with the benchmark's ``mini`` options
    (``select_apple``, its 50 training episodes, cameras B-E, 64 px, 1000 steps, batch 8,
@@ -19,11 +18,12 @@ before any of its runs:
    four position bands, with its blind control in ID; Wilson intervals and Fisher tests, selected vs
    flatten. OmniD against DP with the selected readout is then ``omnid-benchmark``'s job.
 
-Resumable (a finished run is not run again); writes ``<out>/report.md`` and ``<out>/summary.json``.
+Runs on the experiment engine (resumable, ``--dry-run`` prints every command); writes ``<out>/report.md``
+and ``<out>/summary.json``.
 
-    MUJOCO_GL=egl python benchmarks/readout_selection.py --out outputs/readouts \\
+    MUJOCO_GL=egl python -m lerobot_omnid.benchmark.readout_selection --out outputs/readouts \\
         --data outputs/bench_mini/data/select_apple_bcde          # train, validate, select
-    MUJOCO_GL=egl python benchmarks/readout_selection.py --out outputs/readouts --test   # then test
+    MUJOCO_GL=egl python -m lerobot_omnid.benchmark.readout_selection --out outputs/readouts --test
 """
 
 from __future__ import annotations
@@ -35,7 +35,6 @@ from pathlib import Path
 from gym_omnid import TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark import commands
-from lerobot_omnid.benchmark.benchmark import code_commit
 from lerobot_omnid.benchmark.plan import (
     BACKGROUND_OODS,
     BANDS,
@@ -50,6 +49,7 @@ from lerobot_omnid.benchmark.plan import (
 )
 from lerobot_omnid.benchmark.results import read_eval_info
 from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
+from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done, plan
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 PROFILE = PROFILES["mini"]
@@ -128,20 +128,15 @@ def offline(out: Path, readout: str, device: str) -> list[str]:
     return [*cmd, "--out", str(out / "offline" / readout / OFFLINE_OUTPUT)]
 
 
-def is_done(kind: str, target: Path) -> bool:
-    if kind == "record":
-        episodes = VALIDATION_HELDOUT_EPISODES if target.name == HELDOUT_DATA else PROFILE.episodes
-        return commands.recorded_episodes(target) == episodes
-    if kind == "train":
-        return commands.is_trained(target)
-    if kind == "offline":
-        return (target / OFFLINE_OUTPUT).is_file()
-    if kind == "calibration":
-        return (target / BLIND_FILE).is_file()
-    return commands.is_evaluated(target)
-
-
-def validation_steps(out: Path, data: Path, device: str) -> list[commands.Step]:
+def validation_runs(out: Path, data: Path, device: str, record_data: bool) -> list[Run]:
+    """Record the open-loop validation episodes (and the training set unless given), then per readout:
+    train, open-loop error, closed-loop validation."""
+    runs = []
+    if record_data:
+        record = commands.record_command(TASK0, PROFILE.episodes, TRAIN_CAMERAS, PROFILE.image_size, data)
+        runs.append(Run(f"record/{TRAIN_DATA}", "record", tuple(record), data))
+    inputs = () if record_data else (data / "meta" / "info.json", data / "meta" / "stats.json")
+    needs = (f"record/{TRAIN_DATA}",) if record_data else ()
     heldout = out / "data" / HELDOUT_DATA
     record = commands.record_command(
         TASK0,
@@ -151,57 +146,84 @@ def validation_steps(out: Path, data: Path, device: str) -> list[commands.Step]:
         heldout,
         seed=VALIDATION_HELDOUT_SEED,
     )
-    steps: list[commands.Step] = [(f"record/{HELDOUT_DATA}", record, heldout)]
+    runs.append(Run(f"record/{HELDOUT_DATA}", "record", tuple(record), heldout))
     for readout in PLANE_READOUTS:
-        steps.append((f"train/{readout}", train(out, data, readout, device), out / "train" / readout))
-        steps.append((f"offline/{readout}", offline(out, readout, device), out / "offline" / readout))
-        steps.append(
-            (
+        trained = f"train/{readout}"
+        runs += [
+            Run(
+                trained,
+                "train",
+                tuple(train(out, data, readout, device)),
+                out / "train" / readout,
+                needs,
+                inputs=inputs,
+            ),
+            Run(
+                f"offline/{readout}",
+                "offline",
+                tuple(offline(out, readout, device)),
+                out / "offline" / readout,
+                (trained, f"record/{HELDOUT_DATA}"),
+            ),
+            Run(
                 f"eval/validation/{readout}",
-                evaluate(out, "validation", readout, "id", device),
+                "eval",
+                tuple(evaluate(out, "validation", readout, "id", device)),
                 eval_dir(out, "validation", readout, "id"),
-            )
-        )
-    return steps
+                (trained,),
+            ),
+        ]
+    return runs
 
 
-def test_steps(out: Path, selected: str, device: str) -> list[commands.Step]:
-    steps: list[commands.Step] = []
+def test_runs(out: Path, selected: str, device: str) -> list[Run]:
+    """The selected readout and the paper's on the test seeds, each with its blind control in ID."""
+    runs = []
     for readout in dict.fromkeys((selected, PAPER_READOUT)):
-        steps.append(
-            (
-                f"calibration/{readout}",
-                commands.control_calibration_command(
-                    checkpoint(out, readout), "blind", control_file(out, readout)
-                ),
-                control_file(out, readout).parent,
-            )
+        trained = f"train/{readout}"
+        blind = f"calibration/{readout}"
+        cmd = commands.control_calibration_command(
+            checkpoint(out, readout), "blind", control_file(out, readout)
         )
+        runs.append(Run(blind, "calibration", tuple(cmd), control_file(out, readout), (trained,)))
         for setting in TEST_SETTINGS:
-            steps.append(
-                (
+            cmd = evaluate(out, "test", readout, setting, device)
+            runs.append(
+                Run(
                     f"eval/test/{readout}/{setting}",
-                    evaluate(out, "test", readout, setting, device),
+                    "eval",
+                    tuple(cmd),
                     eval_dir(out, "test", readout, setting),
+                    (trained,),
                 )
             )
-        steps.append(
-            (
+        cmd = evaluate(out, "test", readout, "id", device, "blind")
+        runs.append(
+            Run(
                 f"eval/test/{readout}/id_blind",
-                evaluate(out, "test", readout, "id", device, "blind"),
+                "eval",
+                tuple(cmd),
                 eval_dir(out, "test", readout, "id", "blind"),
+                (trained, blind),
             )
         )
-    return steps
+    return runs
 
 
-def validation_results(out: Path) -> dict[str, dict]:
-    """Per readout with a finished validation: its successes, episodes and open-loop errors."""
+def protocol(out: Path, data: Path, device: str, record_data: bool, selected: str | None) -> list[Run]:
+    """The whole plan: validation, and the test of ``selected`` once a selection exists."""
+    runs = validation_runs(out, data, device, record_data)
+    return plan([*runs, *(test_runs(out, selected, device) if selected else ())], out)
+
+
+def validation_results(out: Path, done: set[Path]) -> dict[str, dict]:
+    """Per readout whose validation runs are ``done`` (their outputs): successes, episodes, open-loop
+    errors."""
     results = {}
     for readout in PLANE_READOUTS:
         info = eval_dir(out, "validation", readout, "id") / "eval_info.json"
         errors = out / "offline" / readout / OFFLINE_OUTPUT
-        if info.is_file() and errors.is_file():
+        if info.parent in done and errors.parent in done:
             successes, episodes = read_eval_info(info)
             offline_result = json.loads(errors.read_text())
             results[readout] = {
@@ -231,9 +253,9 @@ def count_text(counts: list[int] | None) -> str:
     return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
 
 
-def report(out: Path) -> dict:
-    """``report.md`` and ``summary.json`` from what is finished; returns the summary."""
-    validation = validation_results(out)
+def report(out: Path, done: set[Path]) -> dict:
+    """``report.md`` and ``summary.json`` from the runs ``done`` (their outputs); returns the summary."""
+    validation = validation_results(out, done)
     selection = json.loads((out / SELECTION_FILE).read_text()) if (out / SELECTION_FILE).is_file() else None
     lines = [f"# Choosing the plane readout ({TASK0}, mini sizes)", ""]
     seeds = f"env seeds {VALIDATION_SEED}-{VALIDATION_SEED + VALIDATION_EPISODES - 1}"
@@ -255,7 +277,7 @@ def report(out: Path) -> dict:
     for readout in PLANE_READOUTS:
         for setting in (*TEST_SETTINGS, "id_blind"):
             info = eval_dir(out, "test", readout, setting) / "eval_info.json"
-            if info.is_file():
+            if info.parent in done:
                 test.setdefault(readout, {})[setting] = list(read_eval_info(info))
     if test and selection:
         chosen = selection["selected"]
@@ -302,31 +324,39 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--test", action="store_true", help="evaluate the selected readout and flatten on the test seeds"
     )
+    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
     parser.add_argument("--report-only", action="store_true")
     args = parser.parse_args(argv)
     out = args.out.resolve()
     data = args.data.resolve() if args.data else out / "data" / TRAIN_DATA
     if args.data and (found := commands.recorded_episodes(data)) != PROFILE.episodes:
         parser.error(f"--data: expected a dataset of {PROFILE.episodes} episodes, got {found} in {data}")
+    selection_file = out / SELECTION_FILE
+    selected = read_selection(selection_file)
+    if args.test and selected is None and not args.dry_run:
+        validation = validation_runs(out, data, args.device, not args.data)
+        parser.error(
+            f"--test: expected every readout validated ({len(PLANE_READOUTS)}) and selected, got "
+            f"{len(validation_results(out, {r.output for r in plan(validation, out) if is_done(r)}))}"
+        )
+    runs = protocol(out, data, args.device, not args.data, selected if args.test else None)
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return
     commit = code_commit()
     if not args.report_only:
-        steps = validation_steps(out, data, args.device)
-        if not args.data:
-            record = commands.record_command(TASK0, PROFILE.episodes, TRAIN_CAMERAS, PROFILE.image_size, data)
-            steps.insert(0, (f"record/{TRAIN_DATA}", record, data))
-        commands.run_steps(steps, out, "readout validation", is_done, commit)
-        results = validation_results(out)
-        if not (out / SELECTION_FILE).is_file() and len(results) == len(PLANE_READOUTS):
+        execute(runs, out, commit=commit, desc="readout selection", stop_on_failure=True)
+        results = validation_results(out, {r.output for r in runs if is_done(r)})
+        if selected is None and len(results) == len(PLANE_READOUTS):
             selection = {"selected": select(results), "rule": select.__doc__, "commit": commit}
-            (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
-        if args.test:
-            if not (out / SELECTION_FILE).is_file():
-                parser.error(
-                    f"--test: expected every readout validated ({len(PLANE_READOUTS)}), got {len(results)}"
-                )
-            selected = json.loads((out / SELECTION_FILE).read_text())["selected"]
-            commands.run_steps(test_steps(out, selected, args.device), out, "readout test", is_done, commit)
-    report(out)
+            selection_file.write_text(json.dumps(selection, indent=2) + "\n")
+    # The test's finished runs are reported whether or not this call asked for them.
+    reported = protocol(out, data, args.device, not args.data, selected or read_selection(selection_file))
+    report(out, {r.output for r in reported if is_done(r)})
+
+
+def read_selection(path: Path) -> str | None:
+    return json.loads(path.read_text())["selected"] if path.is_file() else None
 
 
 if __name__ == "__main__":
