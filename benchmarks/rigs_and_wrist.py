@@ -62,7 +62,10 @@ PAIRS = {"rigs": ("two_rigs", "one_rig"), "wrist": ("wrist", "one_rig")}
 
 def record(out: Path, name: str) -> list[str]:
     rig, cameras, episodes, seed = DATASETS[name]
-    cmd = commands.record_command(TASK, episodes, cameras, PROFILE.image_size, out / "data" / name, seed=seed)
+    root = out / "data" / name
+    cmd = commands.record_command(
+        TASK, episodes, cameras, PROFILE.image_size, root, seed=seed, static_calibration=False
+    )
     return [*cmd, "--rig", rig, "--per-frame-calibration"]
 
 

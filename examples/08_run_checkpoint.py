@@ -67,7 +67,9 @@ def load_policy(checkpoint: Path, device: str | None) -> OmniDPolicy:
 
 
 def make_env(policy: OmniDPolicy, task: str, layout: str, background: str, max_steps: int) -> gym.Env:
-    """The env observing the policy's cameras, at the (height, width) of its training images."""
+    """The env observing the policy's cameras, at the (height, width) of its training images, with every
+    frame's calibration in the observation when the policy reads it per frame (trained on
+    ``omnid-record``'s default per-frame calibration columns)."""
     cameras = [key.removeprefix(f"{OBS_IMAGES}.") for key in policy.camera_keys]
     sizes = {tuple(policy.config.image_features[key].shape[1:]) for key in policy.camera_keys}
     if len(sizes) != 1:
@@ -78,6 +80,7 @@ def make_env(policy: OmniDPolicy, task: str, layout: str, background: str, max_s
         layout=layout,
         background=background,
         image_size=sizes.pop(),
+        per_frame_calibration=bool(policy.config.frame_calibration),
         max_episode_steps=max_steps,
     )
 
@@ -101,7 +104,8 @@ def main(argv: list[str] | None = None) -> None:
         with torch.inference_mode(), tqdm(total=args.max_steps, desc=f"{args.task} episode") as progress:
             while not done:
                 # pixels[<cam>] (H, W, 3) uint8 -> observation.images.<cam> (1, 3, H, W) in [0, 1];
-                # agent_pos -> observation.state (1, state_dim).
+                # agent_pos -> observation.state (1, state_dim); extrinsics.<cam> / intrinsics.<cam> ->
+                # observation.extrinsics.<cam> / observation.intrinsics.<cam> (per-frame calibration).
                 batch = preprocess_observation(observation)
                 batch["task"] = [env.unwrapped.task_description]
                 action = postprocessor(policy.select_action(preprocessor(batch)))

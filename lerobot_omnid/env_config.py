@@ -2,9 +2,12 @@
 
 LeRobot builds ``gym.make(f"gym_omnid/{task}", **gym_kwargs)`` from this config and maps the env's
 observation ``pixels[<cam>]`` to ``observation.images.<cam>`` and ``agent_pos`` to ``observation.state``;
-with ``per_frame_calibration`` also ``extrinsics.<cam>`` / ``intrinsics.<cam>`` to the dataset columns
-``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``
-(:mod:`lerobot_omnid.calibration.frame_columns`).
+with ``per_frame_calibration`` (the default) also ``extrinsics.<cam>`` / ``intrinsics.<cam>`` to the
+dataset columns ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``
+(:mod:`lerobot_omnid.calibration.frame_columns`) that ``omnid-record`` writes by default. A policy reads
+only the keys it was made with, so the columns are harmless to one that does not use them (an OmniD
+checkpoint with its calibration in ``config.json``, LeRobot's stock policies): LeRobot's normaliser and the
+policies' observation queues skip keys outside their features.
 
 Example::
 
@@ -102,8 +105,9 @@ class OmniDEnvConfig(EnvConfig):
 
     The fields a user changes are ``task``, ``layout``, ``background`` and ``rig`` (the evaluation
     setting), ``cameras`` (must match the cameras the policy was trained on), ``image_size`` (must match
-    the training dataset's images) and ``per_frame_calibration`` (on for a policy trained on per-frame
-    calibration columns, e.g. with the wrist camera).
+    the training dataset's images). ``per_frame_calibration`` is on by default, so a policy trained on
+    ``omnid-record``'s per-frame calibration columns gets them; turning it off only drops keys that other
+    policies ignore.
 
     Args:
         task: Benchmark task, one of ``gym_omnid.constants.TASKS``.
@@ -121,7 +125,9 @@ class OmniDEnvConfig(EnvConfig):
         per_frame_calibration: Add every observed camera's calibration of the current frame to the
             observation, which ``lerobot-eval`` passes to the policy as ``observation.extrinsics.<cam>``
             (16 values, ``T_cam_world`` row-major) and ``observation.intrinsics.<cam>`` (9, ``K``), the
-            columns ``omnid-record --per-frame-calibration`` writes. ``--env.per_frame_calibration=true``.
+            columns ``omnid-record`` writes by default. On by default; policies that do not read the
+            columns ignore them. With ``camera_offsets`` the columns are the moved camera's: a policy that
+            reads them sees the move. ``--env.per_frame_calibration=false`` drops them.
         blackout_cameras: Observed cameras whose images are all black (zero pixels), for a control in which
             only the state can drive the policy. Default: none. ``--env.blackout_cameras='[cam_b,cam_c]'``.
         blackout_from_step: The ``blackout_cameras`` go black from this env step of each episode on (0: from
@@ -143,7 +149,7 @@ class OmniDEnvConfig(EnvConfig):
     background: str = "id"
     image_size: int = 128
     rig: str = DEFAULT_RIG
-    per_frame_calibration: bool = False
+    per_frame_calibration: bool = True
     blackout_cameras: list[str] = field(default_factory=list)
     blackout_from_step: int = 0
     camera_offsets: dict[str, list[float]] = field(default_factory=dict)
@@ -227,8 +233,9 @@ class OmniDEnvConfig(EnvConfig):
         """Calibration of each observed camera, keyed like the policy's image features.
 
         Builds the env once. Returns ``{"observation.images.<cam>": CameraCalibration.to_dict()}`` for
-        images of ``image_size``: what a dataset recorded in this setting without per-frame calibration
-        stores in its feature info. The wrist camera has none (it moves): its calibration is per frame.
+        images of ``image_size``: what a dataset recorded in this setting with ``--static-calibration``
+        stores in its feature info (and, per frame, in the columns of one recorded by default). The
+        wrist camera has none (it moves): its calibration is per frame.
         """
         if WRIST_CAMERA in self.cameras:
             raise ValueError(

@@ -1,17 +1,22 @@
 """``omnid-record``: run the scripted experts of the OmniD benchmark and write a LeRobot dataset.
 
-Each camera becomes a video feature ``observation.images.<cam>`` whose ``info["calibration"]`` holds
-its :class:`~lerobot_omnid.calibration.schema.CameraCalibration`; ``observation.state`` and ``action``
-carry the env's state and action names; every frame's ``task`` is the env's language instruction. Only
-successful expert episodes are kept. Attempt ``i`` (counting failed ones) resets the env with seed
-``seed + i``, so the same arguments give the same data.
+Each camera becomes a video feature ``observation.images.<cam>``, and its calibration
+(:class:`~lerobot_omnid.calibration.schema.CameraCalibration`) is written in every frame, as the columns
+``observation.extrinsics.<cam>`` and ``observation.intrinsics.<cam>``
+(:mod:`lerobot_omnid.calibration.frame_columns`); the image features' ``info`` holds no calibration.
+The feature schema is then the same for every rig (``--rig``), so datasets recorded with different rigs,
+today's and next month's, merge with ``lerobot-edit-dataset --operation.type merge``, each episode keeping
+its own rig's calibration. ``observation.state`` and ``action`` carry the env's state and action names;
+every frame's ``task`` is the env's language instruction. Only successful expert episodes are kept.
+Attempt ``i`` (counting failed ones) resets the env with seed ``seed + i``, so the same arguments give the
+same data.
 
-With ``--per-frame-calibration`` every camera's calibration is instead written in every frame, as the
-columns ``observation.extrinsics.<cam>`` and ``observation.intrinsics.<cam>``
-(:mod:`lerobot_omnid.calibration.frame_columns`), and the image features' ``info`` holds no
-calibration: the feature schema is then the same for every rig (``--rig``), so datasets recorded with
-different rigs merge with ``lerobot-edit-dataset --operation.type merge``. The wrist camera
-(``cam_wrist``) moves, so it is recorded only this way.
+``--static-calibration`` writes the older form instead: each camera's calibration once, in its image
+feature's ``info["calibration"]``. Such datasets merge only with datasets of the same rig, but a
+calibration file replaces only this form (``--policy.calibration_path``: the benchmark's blind,
+scrambled and perturbed controls, ``omnid-robustness``), so the benchmark records it. The wrist camera
+(``cam_wrist``) moves, so it is recorded only per frame. ``--per-frame-calibration`` names the default
+(it was opt-in before and is still accepted); the two flags exclude each other.
 
 Example::
 
@@ -144,17 +149,17 @@ class _StopOnSigint:
 
 
 def check_wrist_calibration(cameras: Sequence[str], per_frame_calibration: bool) -> None:
-    """Refuse the wrist camera without per-frame calibration: a moving camera has no static one."""
+    """Refuse the wrist camera with a static calibration: a moving camera has none."""
     if WRIST_CAMERA in cameras and not per_frame_calibration:
         raise ValueError(
             f"cameras: {WRIST_CAMERA} moves with the arm, so its calibration changes every frame; expected "
-            f"--per-frame-calibration (per_frame_calibration=True) with it, got cameras {list(cameras)} "
-            f"without"
+            f"per-frame calibration with it (the default, per_frame_calibration=True), got "
+            f"--static-calibration (per_frame_calibration=False) with cameras {list(cameras)}"
         )
 
 
 def dataset_features(
-    env: gym.Env, cameras: Sequence[str], image_size: int, per_frame_calibration: bool = False
+    env: gym.Env, cameras: Sequence[str], image_size: int, per_frame_calibration: bool = True
 ) -> dict[str, dict]:
     """LeRobot feature spec of the recorded dataset: videos, named state and action, and each camera's
     calibration: static in the video feature's info, or per frame as columns."""
@@ -229,7 +234,7 @@ def record_dataset(
     background: str = "id",
     image_size: int = 128,
     rig: str = DEFAULT_RIG,
-    per_frame_calibration: bool = False,
+    per_frame_calibration: bool = True,
     seed: int = 0,
     max_attempts: int | None = None,
     episode_length: int = MAX_EPISODE_STEPS,
@@ -243,8 +248,9 @@ def record_dataset(
         root: Output directory; must not exist or be empty. Default ``$HF_LEROBOT_HOME/<repo_id>``.
         task, cameras, layout, background, image_size, rig: The env setting (see ``OmniDEnvConfig``).
         per_frame_calibration: Write every camera's calibration in every frame as the columns
-            ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>`` instead of once in the
-            image feature's info (needed for ``cam_wrist``; makes datasets of different rigs mergeable).
+            ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>`` (the default: datasets of
+            different rigs merge, ``cam_wrist`` is possible); False writes it once in the image feature's
+            info instead (the static form, ``--static-calibration``).
         episodes: Successful episodes to save.
         repo_id: Dataset id; default ``local/omnid_<task>``.
         seed: Attempt ``i`` resets the env with ``seed + i``.
@@ -405,12 +411,23 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_RIG,
         help="placements of the fixed cameras (default: %(default)s)",
     )
-    parser.add_argument(
+    calibration = parser.add_mutually_exclusive_group()
+    calibration.add_argument(
         "--per-frame-calibration",
+        dest="per_frame_calibration",
         action="store_true",
+        default=True,
         help="write every camera's calibration in every frame (columns observation.extrinsics.<cam>, "
-        "observation.intrinsics.<cam>) instead of once in the feature info; needed for cam_wrist, makes "
-        "datasets of different rigs mergeable",
+        "observation.intrinsics.<cam>): datasets of different rigs merge with lerobot-edit-dataset; "
+        "needed for cam_wrist (the default)",
+    )
+    calibration.add_argument(
+        "--static-calibration",
+        dest="per_frame_calibration",
+        action="store_false",
+        help="write each camera's calibration once, in its image feature's info (the form of older "
+        "datasets; what --policy.calibration_path and omnid-robustness replace); such datasets of "
+        "different rigs do not merge",
     )
     parser.add_argument(
         "--seed", type=int, default=0, help="attempt i resets the env with seed + i (default: %(default)s)"

@@ -153,3 +153,16 @@ def test_main_names_a_missing_checkpoint(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--checkpoint", str(tmp_path), "--control", "scrambled", "--out", str(tmp_path / "x.json")])
     assert "camera_calibration: expected the calibrated cameras of an OmniD config" in capsys.readouterr().err
+
+
+def test_a_checkpoint_calibrated_per_frame_is_refused(benchmark_cameras):
+    """A calibration file replaces only static calibrations: a control written for a checkpoint that reads
+    a camera's calibration from every frame would leave that camera's untouched."""
+    config = {
+        "camera_calibration": {key: c.to_dict() for key, c in benchmark_cameras.items()},
+        "frame_calibration": ["observation.images.cam_b"],
+        "volume_bounds": gym_omnid.WORKSPACE_BOUNDS,
+    }
+    for control in ("blind", "scrambled", "perturbed"):
+        with pytest.raises(ValueError, match=r"frame_calibration: expected a checkpoint with static .*cam_b"):
+            control_calibrations(config, control)

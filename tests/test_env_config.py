@@ -50,18 +50,28 @@ def test_features_for_camera_subset():
         background="ood2",
         episode_length=30,
     )
+    # The default observation carries every camera's per-frame calibration (omnid-record's columns).
+    columns = {
+        f"{kind}.{cam}": f"observation.{kind}.{cam}"
+        for cam in ("cam_a", "cam_c")
+        for kind in ("extrinsics", "intrinsics")
+    }
     assert cfg.features_map == {
         "action": "action",
         "agent_pos": "observation.state",
         "pixels/cam_a": "observation.images.cam_a",
         "pixels/cam_c": "observation.images.cam_c",
+        **columns,
     }
     assert {k: (f.type, f.shape) for k, f in cfg.features.items()} == {
         "action": (FeatureType.ACTION, (ACTION_DIM,)),
         "agent_pos": (FeatureType.STATE, (STATE_DIM,)),
         "pixels/cam_a": (FeatureType.VISUAL, (64, 64, 3)),
         "pixels/cam_c": (FeatureType.VISUAL, (64, 64, 3)),
+        **{k: (FeatureType.STATE, (16 if k.startswith("extrinsics") else 9,)) for k in columns},
     }
+    without = OmniDEnvConfig(cameras=["cam_a", "cam_c"], per_frame_calibration=False)
+    assert sorted(without.features_map) == ["action", "agent_pos", "pixels/cam_a", "pixels/cam_c"]
     policy_features = env_to_policy_features(cfg)
     assert policy_features["observation.images.cam_c"].shape == (3, 64, 64)
     assert policy_features["observation.state"].shape == (STATE_DIM,)
@@ -72,7 +82,7 @@ def test_features_for_camera_subset():
         "background": "ood2",
         "image_size": 64,
         "rig": "default",
-        "per_frame_calibration": False,
+        "per_frame_calibration": True,
         "blackout_cameras": (),
         "blackout_from_step": 0,
         "camera_offsets": {},
@@ -122,7 +132,8 @@ def test_cli_parsing_of_camera_list():
     assert isinstance(cfg.env, OmniDEnvConfig)
     assert cfg.env.cameras == ["cam_b", "cam_c"] and cfg.env.blackout_cameras == ["cam_c"]
     assert cfg.env.gym_kwargs["blackout_cameras"] == ("cam_c",)
-    assert set(cfg.env.features) == {"action", "agent_pos", "pixels/cam_b", "pixels/cam_c"}
+    columns = {f"{kind}.{cam}" for cam in ("cam_b", "cam_c") for kind in ("extrinsics", "intrinsics")}
+    assert set(cfg.env.features) == {"action", "agent_pos", "pixels/cam_b", "pixels/cam_c", *columns}
     # The robustness options: a camera dying mid-episode, a bumped camera.
     robust = ["--env.blackout_from_step=7", '--env.camera_offsets={"cam_b":[0,0,2,0.02,0,0]}']
     cfg = draccus.parse(Cli, args=[*args, "--env.blackout_cameras=[cam_c]", *robust])

@@ -23,3 +23,12 @@ def test_card_states_cameras_calibration_and_eval_results(tmp_path, monkeypatch)
     cfg = SimpleNamespace(output_dir=tmp_path, steps=10, batch_size=2, seed=0, optimizer=None, dataset=None)
     card = policy.generate_model_card("local/tiny", "omnid", None, None, cfg=cfg)
     assert "| eval_position_ood | 5 | 40.0 |" in card.content
+
+
+def test_card_of_a_policy_calibrated_per_frame(monkeypatch):
+    """A checkpoint trained on a default (per-frame) recording has no static calibration to print."""
+    monkeypatch.setattr(ModelCard, "validate", lambda self, *a, **k: None)
+    keys = [f"observation.images.{c}" for c in ("cam_b", "cam_c", "cam_d", "cam_e")]
+    policy = OmniDPolicy(tiny_config(camera_calibration={}, frame_calibration=keys))
+    card = policy.generate_model_card("local/tiny", "omnid", None, None)
+    assert "`observation.images.cam_c` | calibrated per frame" in card.content

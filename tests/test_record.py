@@ -3,6 +3,7 @@ episodes, are reproducible, survive Ctrl-C, and train and evaluate with the stoc
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -16,12 +17,21 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 from gym_omnid.constants import ACTION_NAMES, CAMERAS, STATE_NAMES
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
+from safetensors.torch import load_file
 
-from lerobot_omnid.calibration.frame_columns import is_calibration_key
-from lerobot_omnid.calibration.schema import calibration_from_feature_info
+from lerobot_omnid.calibration.frame_columns import (
+    extrinsics_column,
+    extrinsics_key,
+    intrinsics_column,
+    intrinsics_key,
+    is_calibration_key,
+)
+from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, calibration_from_feature_info
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.record import EXIT_INTERRUPTED, main, record_dataset
 
@@ -116,12 +126,11 @@ def test_dataset_loads_with_calibrated_videos_names_and_task(five_cam_root):
     for key in meta.video_keys:
         feature = meta.features[key]
         assert feature["dtype"] == "video" and tuple(feature["shape"]) == (SIZE, SIZE, 3)
-        assert feature["info"]["video.height"] == SIZE  # video info merged, calibration kept
-        calib = calibration_from_feature_info(key, feature)
-        assert calib.image_size == (SIZE, SIZE)
-        assert calib.to_dict() == expected[key]
+        assert feature["info"]["video.height"] == SIZE  # video info merged
+        # The default: the calibration is in every frame's columns, none in the feature info.
+        assert CALIBRATION_INFO_KEY not in feature["info"]
+        assert extrinsics_key(key) in meta.features and intrinsics_key(key) in meta.features
 
-    assert not any(is_calibration_key(key) for key in meta.features)  # per-frame columns are opt-in
     assert meta.features["observation.state"]["names"] == list(STATE_NAMES)
     assert meta.features["action"]["names"] == list(ACTION_NAMES)
     assert meta.features["observation.state"]["dtype"] == "float32"
@@ -132,6 +141,11 @@ def test_dataset_loads_with_calibrated_videos_names_and_task(five_cam_root):
         assert item["observation.images.cam_a"].shape == (3, SIZE, SIZE)
         assert item["observation.state"].shape == (len(STATE_NAMES),)
         assert item["action"].shape == (len(ACTION_NAMES),)
+        for key, calib in expected.items():
+            np.testing.assert_array_equal(
+                item[extrinsics_key(key)].numpy(), extrinsics_column(calib["T_cam_world"])
+            )
+            np.testing.assert_array_equal(item[intrinsics_key(key)].numpy(), intrinsics_column(calib["K"]))
     # Every frame's task is the env's instruction.
     assert list(meta.tasks.index) == [APPLE_INSTRUCTION]
     assert set(_read_data(five_cam_root, ["task_index"])["task_index"]) == {0}
@@ -228,6 +242,23 @@ def test_main_records_and_prints_summary(tmp_path, capsys):
     assert _load(root, "me/apples").num_episodes == 1
 
 
+def test_static_calibration_flag_writes_the_feature_info(tmp_path):
+    """``--static-calibration``: the older form, each camera's calibration once in its feature info."""
+    root = tmp_path / "ds"
+    argv = ["--episodes", "1", "--cameras", "cam_b,cam_c", "--image-size", str(SIZE), "--static-calibration"]
+    assert main([*argv, "--root", str(root), "--repo-id", "me/static"]) == 0
+    meta = LeRobotDatasetMetadata("me/static", root=root)
+    expected = OmniDEnvConfig(cameras=["cam_b", "cam_c"], image_size=SIZE).camera_calibrations()
+    for key in meta.video_keys:
+        feature = meta.features[key]
+        assert feature["info"]["video.height"] == SIZE  # video info merged, calibration kept
+        calib = calibration_from_feature_info(key, feature)
+        assert calib.image_size == (SIZE, SIZE)
+        assert calib.to_dict() == expected[key]
+    assert not any(is_calibration_key(key) for key in meta.features)
+    assert _load(root, "me/static").num_episodes == 1
+
+
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
@@ -239,7 +270,11 @@ def test_main_records_and_prints_summary(tmp_path, capsys):
         (["--image-size", "-1"], ["--image-size", "-1"]),
         (["--image-size", "5000"], ["--image-size", "2048", "5000"]),
         (["--rig", "lab9"], ["--rig", "lab9", "bumped"]),
-        (["--cameras", "cam_b,cam_wrist"], ["cam_wrist", "--per-frame-calibration"]),
+        (["--cameras", "cam_b,cam_wrist", "--static-calibration"], ["cam_wrist", "--static-calibration"]),
+        (
+            ["--per-frame-calibration", "--static-calibration"],
+            ["--static-calibration", "--per-frame-calibration"],
+        ),
         (["--episodes", "3", "--max-attempts", "2"], ["--max-attempts", "3", "2"]),
         (["--push-to-hub"], ["--repo-id", "namespace", "local/omnid_select_apple"]),
     ],
@@ -357,10 +392,25 @@ def diffusion_checkpoint(five_cam_root, tmp_path_factory) -> Path:
 
 
 def test_stock_diffusion_trains_on_recorded_dataset(diffusion_checkpoint):
-    assert (diffusion_checkpoint / "config.json").exists()
+    """LeRobot makes the default per-frame calibration columns STATE inputs of a stock policy; constant
+    over one rig's dataset (min == max), their normalisation stays finite, and DP reads only
+    ``observation.state`` and the images (its conditioning does not grow with them)."""
+    config = json.loads((diffusion_checkpoint / "config.json").read_text())
+    key = extrinsics_key("cam_a")
+    assert config["input_features"][key] == {"type": "STATE", "shape": [16]}
+    stats = load_file(
+        next(diffusion_checkpoint.glob("policy_preprocessor_step_*_normalizer_processor.safetensors"))
+    )
+    assert torch.equal(stats[f"{key}.min"], stats[f"{key}.max"])  # constant columns
+    policy = DiffusionPolicy.from_pretrained(diffusion_checkpoint)
+    per_step = len(STATE_NAMES) + len(CAMERAS) * policy.diffusion.rgb_encoder.feature_dim
+    cond_dim = policy.config.diffusion_step_embed_dim + per_step * policy.config.n_obs_steps
+    assert policy.diffusion.unet.down_modules[0][0].cond_encoder[1].in_features == cond_dim
+    assert all(torch.isfinite(p).all() for p in policy.parameters())  # trained without NaN
 
 
 def test_stock_lerobot_eval_runs_omnid_env_and_writes_video(diffusion_checkpoint, tmp_path):
+    """The env's default observation carries the per-frame calibration the checkpoint was trained with."""
     out = tmp_path / "eval"
     _run_cli(
         [
@@ -380,4 +430,5 @@ def test_stock_lerobot_eval_runs_omnid_env_and_writes_video(diffusion_checkpoint
     )
     videos = list((out / "videos").rglob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 0
-    assert (out / "eval_info.json").exists()
+    overall = json.loads((out / "eval_info.json").read_text())["overall"]
+    assert overall["n_episodes"] == 1 and 0 <= overall["pc_success"] <= 100

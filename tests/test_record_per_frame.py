@@ -1,6 +1,7 @@
-"""``omnid-record --per-frame-calibration``: every camera's calibration in every frame as dataset columns
-equal to the env's, a feature schema that is the same for every rig, so that datasets of two rigs merge
-with LeRobot's own ``lerobot-edit-dataset``, which refuses the same datasets recorded without the flag."""
+"""``omnid-record --per-frame-calibration`` (now the default, the flag still accepted): every camera's
+calibration in every frame as dataset columns equal to the env's, a feature schema that is the same for
+every rig, so that datasets of two rigs merge with LeRobot's own ``lerobot-edit-dataset``, which refuses
+the same datasets recorded with ``--static-calibration``."""
 
 from __future__ import annotations
 
@@ -108,7 +109,9 @@ def test_columns_equal_the_env_calibration_in_every_frame(per_frame_root):
 
 def test_wrist_camera_needs_per_frame_calibration(tmp_path):
     with pytest.raises(ValueError, match=r"cam_wrist moves with the arm.*per_frame_calibration=True"):
-        record_dataset(tmp_path / "ds", episodes=1, cameras=["cam_wrist"], image_size=SIZE)
+        record_dataset(
+            tmp_path / "ds", episodes=1, cameras=["cam_wrist"], image_size=SIZE, per_frame_calibration=False
+        )
     assert not (tmp_path / "ds").exists()
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import re
+import shutil
 
 import av
 import gym_omnid  # noqa: F401  (registers the envs)
@@ -18,6 +20,7 @@ from lerobot_omnid.calibration.schema import CameraCalibration, camera_matrices
 from lerobot_omnid.env_config import calibration_dict
 from lerobot_omnid.geometry import FeatureVolume, grid_to_pixels, pixels_to_grid
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
+from lerobot_omnid.record import record_dataset
 from lerobot_omnid.viz.drawing import (
     PlaneView,
     anchor_lattice,
@@ -29,6 +32,7 @@ from lerobot_omnid.viz.drawing import (
     query_index,
 )
 from lerobot_omnid.viz.viz import (
+    DatasetSource,
     VizError,
     main,
     resolve_calibrations,
@@ -247,3 +251,38 @@ def test_env_video(env_checkpoint, tmp_path) -> None:
         assert container.streams.video[0].frames == 3
     assert "step 2" in summary.last.title
     assert summary.share.sum() == pytest.approx(1.0)
+
+
+def test_per_frame_checkpoint_fuses_with_the_source_calibration(env_checkpoint, tmp_path) -> None:
+    """A checkpoint trained on per-frame calibration columns (``omnid-record``'s default) has no
+    calibration in its config.json: omnid-viz fuses with the source's, exactly as the static checkpoint."""
+    per_frame = tmp_path / "ckpt_per_frame"
+    shutil.copytree(env_checkpoint, per_frame)
+    config = json.loads((per_frame / "config.json").read_text())
+    config["frame_calibration"], config["camera_calibration"] = list(config["camera_calibration"]), {}
+    (per_frame / "config.json").write_text(json.dumps(config))
+    static, ours = (
+        visualize(path, tmp_path / path.name, env_task="select_apple", seed=3, dpi=DPI)
+        for path in (env_checkpoint, per_frame)
+    )
+    np.testing.assert_allclose(ours.last.heat, static.last.heat, atol=1e-6)
+    np.testing.assert_allclose(ours.share, static.share, atol=1e-6)
+
+
+def test_dataset_calibration_from_per_frame_columns(tmp_path) -> None:
+    """A dataset recorded with the default per-frame columns: a fixed camera's calibration is its constant
+    columns'; a camera whose columns change (the wrist camera) is refused, naming the column."""
+    root = tmp_path / "per_frame"
+    cams = ["cam_b", "cam_wrist"]
+    record_dataset(root, episodes=1, cameras=cams, image_size=ENV_SIZE, repo_id="local/per_frame",
+                   show_progress=False)  # fmt: skip
+    env = gym.make("gym_omnid/select_apple", cameras=cams, image_size=ENV_SIZE)
+    expected = CameraCalibration.from_dict(calibration_dict(env.unwrapped, "cam_b", "cam_b"))
+    env.close()
+    source = DatasetSource(root, None, 0)
+    calib = source.calibration("cam_b")
+    np.testing.assert_allclose(calib.K, expected.K, rtol=1e-6)
+    np.testing.assert_allclose(calib.T_cam_world, expected.T_cam_world, atol=1e-6)
+    assert calib.image_size == (ENV_SIZE, ENV_SIZE)
+    with pytest.raises(VizError, match=r"observation\.extrinsics\.cam_wrist: expected a fixed camera"):
+        source.calibration("cam_wrist")

@@ -22,7 +22,7 @@ DEPTH_EPS = 1e-9  # m: smallest depth accepted in a perspective divide
 # observed camera: ``f"{EXTRINSICS_OBS_PREFIX}{cam}"`` is ``T_cam_world`` row-major (16,) and
 # ``f"{INTRINSICS_OBS_PREFIX}{cam}"`` is ``K`` row-major (9,), float32. LeRobot's ``preprocess_observation``
 # passes them on as ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``, the names of
-# the dataset columns ``omnid-record --per-frame-calibration`` writes.
+# the dataset columns ``omnid-record`` writes (by default).
 EXTRINSICS_OBS_PREFIX = "extrinsics."
 INTRINSICS_OBS_PREFIX = "intrinsics."
 

@@ -46,7 +46,16 @@ def record_command(
     seed: int = 0,
     layout: str = "id",
     background: str = "id",
+    static_calibration: bool = True,
 ) -> list[str]:
+    """`omnid-record` of ``episodes`` expert episodes into ``root`` (repo id ``local/<root name>``).
+
+    ``static_calibration`` (the benchmark's form) keeps each camera's calibration in its feature info
+    (``--static-calibration``): OmniD then carries it in ``config.json``, where the benchmark's controls
+    (``--policy.calibration_path``: blind, scrambled, perturbed) and ``omnid-robustness`` replace it; a
+    calibration read from every frame would bypass them. False leaves ``omnid-record``'s default,
+    per-frame calibration columns, for datasets to merge across rigs.
+    """
     return [
         str(BIN / "omnid-record"),
         "--task",
@@ -67,6 +76,7 @@ def record_command(
         str(root),
         "--repo-id",
         f"local/{root.name}",
+        *(["--static-calibration"] if static_calibration else []),
     ]
 
 

@@ -96,6 +96,12 @@ def control_calibrations(config: Mapping, control: str) -> dict[str, CameraCalib
     """The calibrations of ``control`` for an OmniD checkpoint's ``config.json`` content."""
     if control not in CONTROLS:
         raise ValueError(f"control: expected one of {list(CONTROLS)}, got {control!r}")
+    if config.get("frame_calibration"):
+        raise ValueError(
+            f"frame_calibration: expected a checkpoint with static calibration (a calibration file replaces "
+            f"only that; train on a dataset recorded with omnid-record --static-calibration), got per-frame "
+            f"calibration of {config['frame_calibration']}"
+        )
     raw = config.get("camera_calibration") or {}
     if not raw:
         raise ValueError(

@@ -35,9 +35,9 @@ from lerobot_omnid.benchmark.plan import MINI, BenchmarkProfile, control_flags, 
 from lerobot_omnid.benchmark.results import read_eval_info
 from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference, wilson_interval
 from lerobot_omnid.cli import positive_int
-from lerobot_omnid.measure.engine import Run, code_commit, execute, plan
+from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, plan
 
-EVAL_BATCH_SIZE = 5  # envs each lerobot-eval runs at once (1.78x faster than one, same env seeds)
+EVAL_BATCH_SIZE = 5  # envs each lerobot-eval runs at once: faster than one, the same env seeds
 BLIND = "id_blind"  # the ID evaluation under the blind control
 
 
@@ -172,6 +172,49 @@ def write_report(
     return margin
 
 
+def plan_runs(
+    profile: Profile, out: Path, device: str = "cpu", episode_length: int | None = None
+) -> list[Run]:
+    """The main job as runs: record, train, the blind control's calibration, the evaluations."""
+    dataset = out / "data" / "select_apple_bcde"
+    train_dir = out / "train"
+    checkpoint = train_dir / CHECKPOINT
+    env_flags = (f"--env.episode_length={episode_length}",) if episode_length else ()
+    blind_file = out / "controls" / "blind.json"
+    blind_flags = tuple(f for f, _ in control_flags("omnid", "blind", TRAIN_CAMERAS, blind_file))
+    record = record_command("select_apple", profile.episodes, TRAIN_CAMERAS, profile.image_size, dataset)
+    train = train_command(dataset, train_dir, profile, device, "select_apple", TRAIN_CAMERAS, env_flags)
+    runs = [
+        Run("record", "record", tuple(record), dataset),
+        Run("train", "train", tuple(train), train_dir, ("record",)),
+        Run(
+            "blind_calibration",
+            "calibration",
+            tuple(control_calibration_command(checkpoint, "blind", blind_file)),
+            blind_file,
+            ("train",),
+        ),
+    ]
+    evaluations = {layout: (layout, env_flags) for layout in ("id", "position_ood")}
+    evaluations[BLIND] = ("id", (*env_flags, *blind_flags))
+    for name, (layout, extra) in evaluations.items():
+        cmd = eval_command(
+            checkpoint,
+            out / f"eval_{name}",
+            "select_apple",
+            layout,
+            TRAIN_CAMERAS,
+            profile.image_size,
+            profile.eval_episodes,
+            device,
+            extra=extra,
+            batch_size=min(EVAL_BATCH_SIZE, profile.eval_episodes),
+        )
+        needs = ("train", "blind_calibration") if name == BLIND else ("train",)
+        runs.append(Run(f"eval_{name}", "eval", tuple(cmd), out / f"eval_{name}", needs))
+    return plan(runs, out)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -189,6 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--episode-length", type=positive_int, help="time limit of evaluation episodes, env steps"
     )
+    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
     args = parser.parse_args(argv)
     base = PROFILES[args.profile]
     profile = Profile(
@@ -199,64 +243,24 @@ def main(argv: list[str] | None = None) -> int:
         eval_episodes=args.eval_episodes or base.eval_episodes,
         policy_flags=base.policy_flags,
     )
-
     out = args.out.resolve()
-    dataset = out / "data" / "select_apple_bcde"
-    train_dir = out / "train"
-    checkpoint = train_dir / CHECKPOINT
-    layouts = ("id", "position_ood")
-    env_flags = (f"--env.episode_length={args.episode_length}",) if args.episode_length else ()
-    blind_file = out / "controls" / "blind.json"
-    blind_flags = tuple(f for f, _ in control_flags("omnid", "blind", TRAIN_CAMERAS, blind_file))
-    evaluations = {layout: (layout, env_flags) for layout in layouts}
-    evaluations[BLIND] = ("id", (*env_flags, *blind_flags))
-    commands = {
-        "record": record_command(
-            "select_apple", profile.episodes, TRAIN_CAMERAS, profile.image_size, dataset
-        ),
-        "train": train_command(
-            dataset, train_dir, profile, args.device, "select_apple", TRAIN_CAMERAS, env_flags
-        ),
-        "blind_calibration": control_calibration_command(checkpoint, "blind", blind_file),
-        **{
-            f"eval_{name}": eval_command(
-                checkpoint,
-                out / f"eval_{name}",
-                "select_apple",
-                layout,
-                TRAIN_CAMERAS,
-                profile.image_size,
-                profile.eval_episodes,
-                args.device,
-                extra=extra,
-                batch_size=min(EVAL_BATCH_SIZE, profile.eval_episodes),
-            )
-            for name, (layout, extra) in evaluations.items()
-        },
-    }
-    # name: (kind, output, needs); the evaluations write their own folder.
-    stages = {
-        "record": ("record", dataset, ()),
-        "train": ("train", train_dir, ("record",)),
-        "blind_calibration": ("calibration", blind_file, ("train",)),
-        **{f"eval_{name}": ("eval", out / f"eval_{name}", ("train",)) for name in evaluations},
-    }
-    stages[f"eval_{BLIND}"] = ("eval", out / f"eval_{BLIND}", ("train", "blind_calibration"))
-    runs = []
-    for name, cmd in commands.items():
-        kind, output, needs = stages[name]
-        runs.append(Run(name, kind, tuple(cmd), output, needs))
-    runs = plan(runs, out)
+    runs = plan_runs(profile, out, args.device, args.episode_length)
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return 0
     status, timings = execute(
         runs, out, verbose=True, commit=code_commit(), desc="OmniD main job", stop_on_failure=True
     )
     for name in (n for n, s in status.items() if s == "reused"):
         print(f"[{name}] already done (same command and inputs), reusing its result")
+    evaluations = [run for run in runs if run.kind == "eval"]
     rows = [
-        (name, read_eval_info(out / f"eval_{name}" / "eval_info.json"), out / f"eval_{name}")
-        for name in evaluations
+        (run.name.removeprefix("eval_"), read_eval_info(run.output / "eval_info.json"), run.output)
+        for run in evaluations
     ]
     report = out / "report.md"
+    commands = {run.name: list(run.cmd) for run in runs}
+    checkpoint = next(run for run in runs if run.kind == "train").output / CHECKPOINT
     margin = write_report(report, args.profile, rows, checkpoint, commands, timings)
     summary = ", ".join(f"{name} {s}/{n}" for name, (s, n), _ in rows)
     print(f"Done in {sum(timings.values()):.0f} s: success {summary}. {margin} Report: {report}")

@@ -1,8 +1,8 @@
 """What ``omnid-benchmark`` runs: its profiles, the LeRobot options of each method (every option that differs
 from the policy's default comes with its reason) and the plan of record / train / eval runs.
 
-Pure: builds command lines and paths from a profile, runs nothing. The protocol (DESIGN.md, section 4 of
-the paper): cameras B-E for training; every task's ID success; on task 0 position OOD, the graded position
+Pure: builds command lines and paths from a profile, runs nothing. The protocol (docs/benchmark.md, section 4
+of the paper): cameras B-E for training; every task's ID success; on task 0 position OOD, the graded position
 bands and four background OODs, and each method's controls (the same checkpoint blind; OmniD with its
 cameras' calibrations permuted or perturbed); the task-0 model fine-tuned with camera-A episodes of
 task 0 and of task 1; OmniD ablations; each fine-tuned model's blind control. Everything after the

@@ -33,7 +33,7 @@ SERIES_COLOURS = {
 }
 SERIES_SHIFT = 0.06  # fraction of the spacing between x positions that series are shifted by, so bars show
 SIGNIFICANT = 0.05  # two-sided Fisher p below which a difference counts
-TARGET_LEVEL = 1.0  # issue 20: the calibration error (cm and degrees) at which ...
+TARGET_LEVEL = 1.0  # robustness targets: the calibration error (cm and degrees) at which ...
 TARGET_CALIBRATION_SHARE = 80.0  # ... at least this share (%) of the rate as trained is kept
 TARGET_DEAD_SHARE = 50.0  # and with one camera dead, at least this share
 
@@ -131,7 +131,7 @@ def _above(row: CellResult, control: CellResult) -> bool:
 
 
 def target_lines(rows: Sequence[Row]) -> list[str]:
-    """Issue 20's targets for one checkpoint: the share of its rate as trained kept at 1 cm / 1 degree of
+    """The robustness targets for one checkpoint: the share of its rate as trained kept at 1 cm / 1 degree of
     calibration error (at least 80 %) and with one camera dead, per variant pooled over the cameras (at
     least 50 %; the worst camera beside it); counted only where the checkpoint is significantly above its
     blind control."""
@@ -146,7 +146,7 @@ def target_lines(rows: Sequence[Row]) -> list[str]:
         counted = "counted: significantly above its blind control"
     else:
         counted = "not counted: not significantly above its blind control"
-    lines = [f"Issue 20's targets ({counted}):", ""]
+    lines = [f"Robustness targets ({counted}):", ""]
 
     def share(row: Row) -> float:
         reference = _as_trained(row, nominal)
@@ -194,7 +194,7 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
     if "blind" in found:
         lines += [
             "",
-            "A curve counts only for a checkpoint significantly above its blind control (issue 20).",
+            "A curve counts only for a checkpoint significantly above its blind control.",
         ]
     lines += ["", *target_lines(rows)]
     lines += [

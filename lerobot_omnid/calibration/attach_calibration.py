@@ -31,7 +31,7 @@ one to ``meta/info.json.bak`` (delete it before pushing the dataset to the Hub, 
 columns, videos copied as they are) in which every checked camera's calibration is a constant per-frame
 column (``observation.extrinsics.<cam>``, ``observation.intrinsics.<cam>``:
 :mod:`lerobot_omnid.calibration.frame_columns`) and the image features' ``info`` holds no calibration:
-the feature schema of datasets recorded with ``omnid-record --per-frame-calibration``, so that the copy
+the feature schema of datasets recorded by ``omnid-record`` (its default form), so that the copy
 merges with them and with copies of datasets from other rigs. The calibration is the file's or, without
 ``--calibration``, the one already in the dataset's feature ``info``; the same checks run first. The
 source dataset is not touched.

@@ -1,6 +1,6 @@
 """Camera calibration: the one schema shared by datasets, configs and checkpoints.
 
-Convention (see DESIGN.md):
+Convention (docs/calibration.md):
 - world frame = robot base frame: x forward, y left, z up, metres; z = 0 is the table top;
 - ``K`` (3x3, pixels) is for an image of ``image_size = (height, width)``; OpenCV pinhole, pixel
   centres at integer coordinates, u right, v down;

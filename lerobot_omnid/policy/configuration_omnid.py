@@ -42,7 +42,7 @@ logger = logging.getLogger(__name__)
 @PreTrainedConfig.register_subclass("omnid")
 @dataclass
 class OmniDConfig(PreTrainedConfig):
-    """Configuration of OmniDPolicy. Defaults follow the paper (section 3, DESIGN.md).
+    """Configuration of OmniDPolicy. Defaults follow the paper (section 3).
 
     Fields a user will most likely change: ``volume_bounds`` (the workspace of the robot, in its base
     frame), ``resize_shape`` and the model sizes (``d_model``, ``num_layers``, ``volume_shape``,

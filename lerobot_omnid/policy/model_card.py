@@ -33,6 +33,12 @@ def omnid_card_section(config: OmniDConfig, eval_results: dict[str, dict]) -> st
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for key in config.image_features:
+        if key in config.frame_calibration:  # a moving camera, or a dataset of several rigs
+            lines.append(f"| `{key}` | calibrated per frame (`observation.extrinsics.*` columns) |||||")
+            continue
+        if key not in config.camera_calibration:  # the "w/o OFG" ablation needs none
+            lines.append(f"| `{key}` | not calibrated |||||")
+            continue
         calib = config.calibration(key)
         (fx, _, cx), (_, fy, cy), _ = calib.K
         centre = camera_centers_world(torch.tensor(calib.T_cam_world, dtype=torch.float64)).tolist()

@@ -30,6 +30,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from lerobot_omnid.calibration.frame_columns import (
+    extrinsics_from_column,
+    extrinsics_key,
+    intrinsics_from_column,
+    intrinsics_key,
+)
 from lerobot_omnid.calibration.schema import (
     CALIBRATION_INFO_KEY,
     CalibrationError,
@@ -85,8 +91,32 @@ class DatasetSource:
         self.num_frames = len(self.dataset)
 
     def calibration(self, cam: str) -> CameraCalibration | None:
-        calib = (self.meta.features[image_key(cam)].get("info") or {}).get(CALIBRATION_INFO_KEY)
-        return None if calib is None else CameraCalibration.from_dict(calib, camera=image_key(cam))
+        """The camera's calibration: its feature info's, else its per-frame columns' (``omnid-record``'s
+        default), which must then be constant over the episode (omnid-viz draws fixed cameras)."""
+        key = image_key(cam)
+        calib = (self.meta.features[key].get("info") or {}).get(CALIBRATION_INFO_KEY)
+        if calib is not None:
+            return CameraCalibration.from_dict(calib, camera=key)
+        columns = (intrinsics_key(cam), extrinsics_key(cam))
+        if not all(column in self.meta.features for column in columns):
+            return None
+        frames = self.dataset.hf_dataset.select_columns(["episode_index", *columns]).with_format("numpy")
+        episode = np.asarray(frames["episode_index"]) == self.episode
+        K, cam_T_world = (np.stack(frames[column])[episode] for column in columns)
+        for column, values in zip(columns, (K, cam_T_world), strict=True):
+            if not np.array_equal(values, np.broadcast_to(values[0], values.shape)):
+                raise VizError(
+                    f"--dataset-root: {column}: expected a fixed camera (constant columns over episode "
+                    f"{self.episode}), got values that change between frames; omnid-viz draws fixed cameras"
+                )
+        return CameraCalibration.from_dict(
+            {
+                "K": intrinsics_from_column(K[0]).tolist(),
+                "T_cam_world": extrinsics_from_column(cam_T_world[0]).tolist(),
+                "image_size": list(self.image_hw(cam)),
+            },
+            camera=key,
+        )
 
     def image_hw(self, cam: str) -> tuple[int, int]:
         return tuple(self.meta.features[image_key(cam)]["shape"][:2])
@@ -291,6 +321,9 @@ def visualize(
     try:
         calibs = resolve_calibrations(config, cams, source)
         config.cameras = cams
+        # One calibration per camera for the whole run, static: a checkpoint that reads its cameras'
+        # calibration from every frame's columns gets the source's here instead.
+        config.frame_calibration = []
         config.camera_calibration.update(
             {image_key(c): k.to_dict() for c, k in zip(cams, calibs, strict=True)}
         )

@@ -1,0 +1,369 @@
+"""The README's headline numbers against the committed run summaries, and the results pages against
+themselves, so that a number edited on a page without a run behind it fails here.
+
+:func:`headline_errors` reads the README's "Headline results" section strictly (a count, interval, p-value
+or sentence it cannot find is an error too) and recomputes each from the summaries under ``docs/results/``,
+pooled as ``omnid-benchmark --report-only --also`` pools them (``read_summary``, ``check_comparable``,
+``merge``, ``collect``), with the package's Wilson interval and Fisher test. ``test_an_edited_readme_fails``
+feeds it altered texts to show that it can fail. The other tests check ``docs/results.md`` and
+``docs/results/history.md``: every ``k/n (low-high %)`` is the Wilson interval of ``k/n``, every link
+resolves, the rebuild commands name committed summaries, and no path of one machine appears.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from pathlib import Path
+
+import pytest
+
+from lerobot_omnid.benchmark.results import EvalRecord, check_comparable, collect, merge, read_summary
+from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+RESULTS_PAGE = ROOT / "docs" / "results.md"
+HISTORY_PAGE = ROOT / "docs" / "results" / "history.md"
+SUMMARIES = ROOT / "docs" / "results"
+HEADLINE_SUMMARIES = ("mini_seed1000-1001_eval30_cpu2.json", "mini_seed1002_eval30_cpu2.json")
+"""The three-seed OmniD-vs-DP run: docs/results.md's "In distribution" rebuild command pools these."""
+FEWSHOT_SUMMARIES = tuple(f"mini-fewshot_seed{seed}_eval30_cpu2.json" for seed in (1000, 1001, 1002))
+"""The three-seed few-shot run: docs/results.md's "Few-shot on camera A" rebuild command pools these."""
+
+TASK0 = "select_apple"
+TABLES = ("ood1", "ood2", "ood3", "ood4")
+BANDS = tuple(f"position_band_{k}" for k in range(1, 5))
+ROW_MODELS = {"OmniD": "omnid", "DP": "diffusion"}
+"""A headline table row's first word -> the model of its cells."""
+COLUMNS = {
+    "Task 0 ID": (("id",), ""),
+    "blind, ID": (("id",), "blind"),
+    "scrambled geometry, ID": (("id",), "scrambled"),
+    "4 unseen tables pooled": (TABLES, ""),
+    "position bands 0-10 cm": (BANDS, ""),
+}
+"""A headline table column header -> (the task-0 settings its cells pool, the control)."""
+WORDS = {"one": 1, "two": 2, "three": 3, "four": 4, "five": 5}
+COUNT = re.compile(r"^\**(\d+)/(\d+)\** \((\d+(?:\.\d+)?)-(\d+(?:\.\d+)?) %\)$")
+"""A headline cell: ``74/90 (73-89 %)``, the count possibly bold."""
+P_VALUE = re.compile(r"^\**(< ?)?(\d+(?:\.\d+)?)\**$")
+ON_PAGE = re.compile(r"\b(\d+)/(\d+)\**,? \((\d+(?:\.\d+)?)-(\d+(?:\.\d+)?) %\)")
+"""A success count with its interval anywhere on a results page: ``12/90 (7.8-21.9 %)``."""
+MACHINE_PATHS = ("/work", "/tmp", "/root")
+
+
+def load(names: Sequence[str]) -> list[EvalRecord]:
+    """The evaluations of the summaries, merged as ``omnid-benchmark --report-only --also`` merges them."""
+    profile, groups = None, []
+    for name in names:
+        other, records = read_summary(SUMMARIES / name)
+        profile = profile or other
+        check_comparable(profile, other, name)
+        groups.append(records)
+    return merge(groups)
+
+
+def pooled(
+    records: Sequence[EvalRecord],
+    model: str,
+    settings: Sequence[str],
+    control: str = "",
+    train_seed: int | None = None,
+    task: str = TASK0,
+) -> tuple[int, int] | None:
+    """(successes, episodes) of ``model`` over ``settings``, or None where the summaries have none of them."""
+    cells = collect(records, control, train_seed)
+    found = [cells[(model, task, s)] for s in settings if (model, task, s) in cells]
+    if not found:
+        return None
+    return sum(c.successes for c in found), sum(c.episodes for c in found)
+
+
+def printed(value: float, like: str) -> str:
+    """``value`` (a fraction) as a percentage with as many decimals as ``like`` shows."""
+    decimals = len(like.split(".")[1]) if "." in like else 0
+    return f"{100 * value:.{decimals}f}"
+
+
+def interval_errors(where: str, text: str, successes: int, episodes: int) -> list[str]:
+    """Errors if ``text`` (``k/n (low-high %)``) is not ``successes/episodes`` with its Wilson interval."""
+    match = COUNT.match(text)
+    if match is None:
+        return [f"{where}: expected 'k/n (low-high %)', got {text!r}"]
+    k, n, low, high = match.groups()
+    if (int(k), int(n)) != (successes, episodes):
+        return [f"{where}: the summaries give {successes}/{episodes}, the README {k}/{n}"]
+    estimate = wilson_interval(successes, episodes)
+    if (printed(estimate.low, low), printed(estimate.high, high)) != (low, high):
+        expected = f"{printed(estimate.low, low)}-{printed(estimate.high, high)}"
+        return [f"{where}: Wilson 95 % interval of {k}/{n} is {expected} %, the README says {low}-{high} %"]
+    return []
+
+
+def p_errors(where: str, text: str, p: float) -> list[str]:
+    """Errors if ``text`` (``0.021``, ``< 0.0001``, possibly bold) does not state the p-value ``p``."""
+    match = P_VALUE.match(text)
+    if match is None:
+        return [f"{where}: expected a p-value, got {text!r}"]
+    below, value = match.groups()
+    decimals = len(value.split(".")[1]) if "." in value else 0
+    if below and not p < float(value):
+        return [f"{where}: Fisher p = {p:.2g}, the README says < {value}"]
+    if not below and abs(p - float(value)) > 0.5 * 10**-decimals:
+        return [f"{where}: Fisher p = {p:.2g}, the README says {value}"]
+    return []
+
+
+def headline_section(readme: str) -> str:
+    match = re.search(r"^## Headline results\n(.*?)(?=^## |\Z)", readme, re.MULTILINE | re.DOTALL)
+    return match.group(1) if match else ""
+
+
+def table_errors(section: str, records: Sequence[EvalRecord]) -> list[str]:
+    """The headline table: every cell's count and interval, every blank cell, the p row."""
+    rows = [
+        [cell.strip() for cell in line.strip().strip("|").split("|")]
+        for line in section.splitlines()
+        if line.startswith("|") and not set(line) <= set("|- ")
+    ]
+    if not rows or rows[0][0] != "Method":
+        return ["headline table: expected a table whose first column is 'Method', found none"]
+    header, body = rows[0], rows[1:]
+    errors = [f"headline table: unknown column {h!r}" for h in header[1:] if h not in COLUMNS]
+    stated: dict[str, dict[str, tuple[int, int]]] = {}
+    p_row = None
+    for row in body:
+        first = row[0].split()[0] if row[0] else ""
+        if row[0] == "p":
+            p_row = row
+        elif first in ROW_MODELS:
+            model = ROW_MODELS[first]
+            stated[model] = {}
+            for column, cell in zip(header[1:], row[1:], strict=True):
+                if column not in COLUMNS:
+                    continue
+                settings, control = COLUMNS[column]
+                truth = pooled(records, model, settings, control)
+                where = f"headline table, {first}, {column!r}"
+                if truth is None and cell:
+                    errors.append(f"{where}: the summaries have no such evaluation, the README {cell!r}")
+                elif truth is None:
+                    continue
+                elif not cell:
+                    errors.append(f"{where}: blank, the summaries give {truth[0]}/{truth[1]}")
+                else:
+                    errors += interval_errors(where, cell, *truth)
+                    stated[model][column] = truth
+        else:
+            errors.append(f"headline table: unknown row {row[0]!r}")
+    errors += [f"headline table: no {name} row" for name, m in ROW_MODELS.items() if m not in stated]
+    if p_row is None:
+        return [*errors, "headline table: no p row"]
+    for column, cell in zip(header[1:], p_row[1:], strict=True):
+        omnid, dp = stated.get("omnid", {}).get(column), stated.get("diffusion", {}).get(column)
+        if cell and omnid and dp:
+            errors += p_errors(f"headline table, p, {column!r}", cell, fisher_exact(*omnid, *dp))
+        elif cell:
+            errors.append(f"headline table, p, {column!r}: a p-value without both methods' counts")
+    return errors
+
+
+def claim(text: str, pattern: str, errors: list[str]) -> re.Match | None:
+    """The README sentence ``pattern`` (whitespace-normalised), or an error saying it is gone."""
+    match = re.search(pattern, text)
+    if match is None:
+        errors.append(f"headline: expected a sentence matching {pattern!r}, found none")
+    return match
+
+
+def counts(
+    records: Sequence[EvalRecord],
+    model: str,
+    settings: Sequence[str],
+    control: str = "",
+    train_seed: int | None = None,
+) -> tuple[int, int]:
+    """:func:`pooled` for a sentence that needs the cell: a KeyError naming it where the summaries lack it."""
+    found = pooled(records, model, settings, control, train_seed)
+    if found is None:
+        raise KeyError(f"{model} {settings} control {control or 'none'} training seed {train_seed}")
+    return found
+
+
+def headline_errors(readme: str, records: Sequence[EvalRecord], fewshot: Sequence[EvalRecord]) -> list[str]:
+    """Everything the README's headline section states that the summaries do not give (empty: all agree)."""
+    section = headline_section(readme)
+    if not section:
+        return ["README: expected a '## Headline results' section, found none"]
+    errors = table_errors(section, records)
+    try:
+        errors += sentence_errors(" ".join(section.split()), records, fewshot)
+    except KeyError as e:
+        errors.append(f"headline: a sentence needs an evaluation the summaries lack: {e}")
+    return errors
+
+
+def sentence_errors(text: str, records: Sequence[EvalRecord], fewshot: Sequence[EvalRecord]) -> list[str]:
+    """The headline's sentences (``text``: whitespace-normalised) against the summaries."""
+    errors: list[str] = []
+    seeds = sorted({r.train_seed for r in records})
+    episodes = {r.episodes for r in records}
+
+    if m := claim(text, r"Below: (\w+) training seeds, (\d+) episodes per cell and seed", errors):
+        if WORDS.get(m[1]) != len(seeds):
+            errors.append(f"headline: '{m[1]} training seeds', the summaries have {seeds}")
+        if episodes != {int(m[2])}:
+            errors.append(f"headline: {m[2]} episodes per cell and seed, the summaries {sorted(episodes)}")
+    m = claim(text, r"--train-seeds ([\d,]+) --eval-episodes (\d+)", errors)
+    if m and ([int(s) for s in m[1].split(",")] != seeds or episodes != {int(m[2])}):
+        errors.append(f"headline command: --train-seeds {m[1]} --eval-episodes {m[2]}; summaries {seeds}")
+    if m := claim(text, r"Both beat their blind controls \(p < ([\d.]+)\)", errors):
+        for model in ROW_MODELS.values():
+            p = fisher_exact(*counts(records, model, ("id",)), *counts(records, model, ("id",), "blind"))
+            if not p < float(m[1]):
+                errors.append(f"headline: {model} over its blind control p = {p:.2g}, not < {m[1]}")
+    if m := claim(text, r"OmniD fails (\d+)/(\d+) episodes with its calibrations permuted", errors):
+        k, n = counts(records, "omnid", ("id",), "scrambled")
+        if (int(m[1]), int(m[2])) != (n - k, n):
+            errors.append(f"headline: OmniD fails {m[1]}/{m[2]} scrambled, the summaries {n - k}/{n}")
+    if m := claim(text, r"keeps (\d+)/(\d+) with every camera 2 cm and 2 degrees off", errors):
+        truth = counts(records, "omnid", ("id",), "perturbed")
+        if (int(m[1]), int(m[2])) != truth:
+            errors.append(f"headline: OmniD keeps {m[1]}/{m[2]} perturbed, the summaries {truth}")
+    if claim(text, r"OmniD leads in distribution at each seed", errors):
+        for seed in seeds:
+            omnid, dp = (counts(records, model, ("id",), train_seed=seed) for model in ("omnid", "diffusion"))
+            if not omnid[0] > dp[0]:
+                errors.append(f"headline: OmniD leads at each seed, but seed {seed}: {omnid} vs DP {dp}")
+    if m := claim(text, r"on unseen tables at (\w+) seeds of (\w+)", errors):
+        tables = {
+            s: [counts(records, model, TABLES, train_seed=s)[0] for model in ("omnid", "diffusion")]
+            for s in seeds
+        }
+        ahead = sum(omnid > dp for omnid, dp in tables.values())
+        if (WORDS.get(m[1]), WORDS.get(m[2])) != (ahead, len(seeds)):
+            errors.append(f"headline: tables '{m[1]} seeds of {m[2]}', the summaries {ahead} of {len(seeds)}")
+    if claim(text, r"Neither generalises in position beyond the first band", errors):
+        for model in ROW_MODELS.values():
+            if counts(records, model, BANDS[1:])[0] != 0:
+                errors.append(f"headline: {model} succeeds beyond the first position band")
+    pattern = r"camera A \(OmniD (\d+)/(\d+), DP (\d+)/(\d+), p = ([\d.]+); neither above its blind control\)"
+    if m := claim(text, pattern, errors):
+        omnid, dp = (counts(fewshot, model, ("fewshot_a",)) for model in ("omnid", "diffusion"))
+        if (int(m[1]), int(m[2]), int(m[3]), int(m[4])) != (*omnid, *dp):
+            errors.append(f"headline: few-shot {m[1]}/{m[2]} and {m[3]}/{m[4]}; summaries {omnid}, {dp}")
+        errors += p_errors("headline: few-shot p", m[5], fisher_exact(*omnid, *dp))
+        for model, tuned in (("omnid", omnid), ("diffusion", dp)):
+            blind = counts(fewshot, model, ("fewshot_a",), "blind")
+            if tuned[0] > blind[0] and fisher_exact(*tuned, *blind) < 0.05:
+                errors.append(f"headline: few-shot {model} {tuned} is above its blind control {blind}")
+    return errors
+
+
+@pytest.fixture(scope="module")
+def headline_records() -> list[EvalRecord]:
+    return load(HEADLINE_SUMMARIES)
+
+
+@pytest.fixture(scope="module")
+def fewshot_records() -> list[EvalRecord]:
+    return load(FEWSHOT_SUMMARIES)
+
+
+def test_readme_headline_matches_the_summaries(headline_records, fewshot_records):
+    assert headline_errors(README.read_text(), headline_records, fewshot_records) == []
+
+
+@pytest.mark.parametrize(
+    ("old", "new"),
+    [
+        ("| 74/90 (73-89 %) |", "| 75/90 (73-89 %) |"),  # a count
+        ("| 74/90 (73-89 %) |", "| 74/90 (72-89 %) |"),  # an interval
+        ("| 50/360 (11-18 %) |", "| 50/350 (11-18 %) |"),  # a denominator
+        ("| 2/90 (1-8 %) |", "| |"),  # a blanked cell
+        ("**0.021**", "**0.21**"),  # a p-value
+        ("fails 89/90 episodes", "fails 88/90 episodes"),
+        ("keeps 72/90 with", "keeps 73/90 with"),
+        ("at two seeds of three", "at three seeds of three"),
+        ("(OmniD 19/90, DP 10/90, p = 0.10;", "(OmniD 19/90, DP 9/90, p = 0.10;"),
+        ("DP 10/90, p = 0.10;", "DP 10/90, p = 0.01;"),
+        ("Below: three", "Below: two"),
+        ("OmniD leads in distribution at each seed", "OmniD leads in distribution at most seeds"),  # gone
+        ("| scrambled geometry, ID |", "| scrambled geometry, position OOD |"),  # an unknown column
+    ],
+)
+def test_an_edited_readme_fails(old, new, headline_records, fewshot_records):
+    """The checker can fail: each edit of one headline number or claim makes it report an error."""
+    readme = README.read_text()
+    assert readme.count(old) == 1, f"the README no longer contains {old!r} once: update this edit"
+    errors = headline_errors(readme.replace(old, new), headline_records, fewshot_records)
+    assert len(errors) == 1, f"editing {old!r} -> {new!r}: expected one error, got {errors}"
+
+
+@pytest.mark.parametrize("page", [RESULTS_PAGE, HISTORY_PAGE], ids=["results", "history"])
+def test_every_interval_on_the_results_pages_is_its_counts_wilson_interval(page):
+    found = ON_PAGE.findall(page.read_text())
+    assert found, f"{page.name}: no 'k/n (low-high %)' found"
+    wrong = []
+    for k, n, low, high in found:
+        estimate = wilson_interval(int(k), int(n))
+        if (printed(estimate.low, low), printed(estimate.high, high)) != (low, high):
+            wrong.append(f"{k}/{n} ({low}-{high} %): Wilson gives {estimate.low:.4f}-{estimate.high:.4f}")
+    assert wrong == []
+
+
+def test_an_edited_interval_on_a_results_page_fails():
+    """The page check can fail: the same regex and rule reject a wrong interval."""
+    (k, n, low, high) = ON_PAGE.findall("OmniD 74/90 (73.1-88.9 %)")[0]
+    estimate = wilson_interval(int(k), int(n))
+    assert (printed(estimate.low, low), printed(estimate.high, high)) != (low, high)
+
+
+def anchors(page: Path) -> set[str]:
+    """GitHub's heading anchors of a markdown page."""
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.DOTALL)
+    headings = re.findall(r"^#+ (.+)$", text, re.MULTILINE)
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in headings}
+
+
+def link_errors(page: Path, only_into: Sequence[Path] = ()) -> list[str]:
+    """Relative links of ``page`` whose file or heading does not exist (only those into ``only_into``)."""
+    errors = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
+        if re.match(r"[a-z]+:", target):
+            continue
+        path, _, anchor = target.partition("#")
+        file = (page.parent / path).resolve() if path else page
+        if only_into and file not in only_into:
+            continue
+        if not file.exists():
+            errors.append(f"{page.name}: {target}: no such file")
+        elif anchor and file.suffix == ".md" and anchor not in anchors(file):
+            errors.append(f"{page.name}: {target}: no such heading in {file.name}")
+    return errors
+
+
+def test_links_of_the_results_pages_resolve():
+    pages = [RESULTS_PAGE, HISTORY_PAGE, SUMMARIES / "README.md"]
+    assert [e for page in pages for e in link_errors(page)] == []
+
+
+def test_links_into_the_results_pages_resolve():
+    pages = [README, *(ROOT / "docs").glob("*.md")]
+    into = [RESULTS_PAGE, HISTORY_PAGE]
+    assert [e for page in pages for e in link_errors(page, into)] == []
+
+
+def test_rebuild_commands_name_the_committed_summaries():
+    """The results page's rebuild commands pool exactly the files this test checks, and they exist."""
+    blocks = re.findall(r"```bash\n(.*?)```", RESULTS_PAGE.read_text(), re.DOTALL)
+    named = {name for block in blocks for name in re.findall(r"docs/results/([\w.-]+\.json)", block)}
+    assert set(HEADLINE_SUMMARIES) | set(FEWSHOT_SUMMARIES) <= named
+    assert [name for name in named if not (SUMMARIES / name).is_file()] == []
+
+
+@pytest.mark.parametrize("page", [RESULTS_PAGE, HISTORY_PAGE, SUMMARIES / "README.md"], ids=lambda p: p.name)
+def test_no_path_of_one_machine(page):
+    text = page.read_text()
+    assert [p for p in MACHINE_PATHS if p in text] == []
