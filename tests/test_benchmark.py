@@ -712,10 +712,10 @@ def test_real_tools_end_to_end_tiny(jobs):
     for control in ("blind", "scrambled", "perturbed"):
         calibrations = load_calibration_file(out / "controls" / "omnid" / TASK0 / f"{control}.json")
         assert sorted(calibrations) == [f"observation.images.cam_{c}" for c in "bcde"]
-    run_summary = json.loads(
-        (out / "eval_blind" / "diffusion" / TASK0 / "id" / "seed1" / "run_summary.json").read_text()
+    stamp = json.loads(
+        (out / "stamps" / "eval_blind" / "diffusion" / TASK0 / "id" / "seed1.json").read_text()
     )
-    assert "--env.blackout_cameras=[cam_b,cam_c,cam_d,cam_e]" in run_summary["command"]
+    assert "--env.blackout_cameras=[cam_b,cam_c,cam_d,cam_e]" in stamp["command"]
     assert len(json.loads((out / "summary.json").read_text())["evaluations"]) == 6
     report = (out / "report.md").read_text()
     assert "| Method | Select Apple | Average |" in report

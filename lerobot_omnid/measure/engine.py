@@ -100,7 +100,7 @@ def file_fingerprint(path: Path) -> str:
 
 def plan(runs: Sequence[Run], out: Path) -> list[Run]:
     """Check a protocol's runs (unique names, known kinds, needs listed before) and give each its
-    fingerprint and stamp path under ``out``."""
+    fingerprint and stamp path under ``out``, the campaign's folder."""
     fingerprints: dict[str, str] = {}
     files: dict[Path, str] = {}
     planned = []
@@ -113,7 +113,9 @@ def plan(runs: Sequence[Run], out: Path) -> list[Run]:
         if unknown:
             raise ValueError(f"plan: {run.name} needs {unknown}, which are not planned before it")
         inputs = [files.setdefault(path, file_fingerprint(path)) for path in run.inputs]
-        content = json.dumps([list(run.cmd), [fingerprints[n] for n in run.needs], inputs])
+        # Paths inside the campaign's folder count relative to it: a moved or copied folder resumes.
+        cmd = [arg.replace(str(out), "<out>") for arg in run.cmd]
+        content = json.dumps([cmd, [fingerprints[n] for n in run.needs], inputs])
         fingerprints[run.name] = hashlib.sha256(content.encode()).hexdigest()[:16]
         stamp = out / STAMPS / f"{run.name}.json"
         planned.append(replace(run, fingerprint=fingerprints[run.name], stamp=stamp))
