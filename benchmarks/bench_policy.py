@@ -7,6 +7,12 @@ its own fresh process (so peak memory is its own) and the ratios are printed sid
     python benchmarks/bench_policy.py --profile paper    # the paper's (64x16x64 grid, 4 cameras, 480x480,
                                                          # batch 8); use --device cuda on a GPU machine
 
+``--against FIELD=JSON`` times instead OmniD with and without an option, in one process with their
+training steps alternating (A B, B A, ...), so a busy machine slows both alike and the printed ratio stays
+meaningful where absolute times do not (e.g. on 2 shared CPU cores):
+
+    python benchmarks/bench_policy.py --against fuse_last_step_only=true
+
 Peak memory: ``torch.cuda.max_memory_allocated`` on CUDA; on CPU the process's peak resident set size
 (``ru_maxrss``) minus the resident size before the policy was built.
 """
@@ -111,11 +117,7 @@ def measure(name: str, profile: Profile, device: str, repeats: int, queue: mp.Qu
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB on Linux
     policy = build_policy(name, profile, device).to(device)
     n_params = sum(p.numel() for p in policy.parameters())
-    B, T, size = profile.batch_size, 2, profile.image_size
-    batch = {f"observation.images.{c}": torch.rand(B, T, 3, size, size, device=device) for c in CAMERAS}
-    batch["observation.state"] = torch.randn(B, T, STATE_DIM, device=device)
-    batch["action"] = torch.randn(B, 16, ACTION_DIM, device=device)
-    batch["action_is_pad"] = torch.zeros(B, 16, dtype=torch.bool, device=device)
+    batch = synthetic_batch(profile, device)
     optimizer = torch.optim.AdamW(policy.parameters(), lr=1e-4)
 
     def sync() -> None:
@@ -164,6 +166,60 @@ def measure(name: str, profile: Profile, device: str, repeats: int, queue: mp.Qu
     )
 
 
+def synthetic_batch(profile: Profile, device: str) -> dict[str, torch.Tensor]:
+    """A training batch of the profile's size: 4 cameras, 2 observation steps, horizon 16."""
+    B, T, size = profile.batch_size, 2, profile.image_size
+    batch = {f"observation.images.{c}": torch.rand(B, T, 3, size, size, device=device) for c in CAMERAS}
+    batch["observation.state"] = torch.randn(B, T, STATE_DIM, device=device)
+    batch["action"] = torch.randn(B, 16, ACTION_DIM, device=device)
+    batch["action_is_pad"] = torch.zeros(B, 16, dtype=torch.bool, device=device)
+    return batch
+
+
+def alternating_steps(base: Profile, overrides: dict, device: str, steps: int) -> dict[str, float]:
+    """Median training-step time of the profile's OmniD (A) and of it with ``overrides`` (B), their steps
+    alternating in this process, who goes first alternating too."""
+    variant = Profile(base.image_size, base.batch_size, {**base.omnid, **overrides}, base.diffusion)
+    torch.manual_seed(0)
+    policies = {
+        "A (profile)": build_policy("omnid", base, device),
+        f"B {overrides}": build_policy("omnid", variant, device),
+    }
+    batch = synthetic_batch(base, device)
+    optimizers = {
+        name: torch.optim.AdamW(p.to(device).train().parameters(), lr=1e-4) for name, p in policies.items()
+    }
+    times: dict[str, list[float]] = {name: [] for name in policies}
+    for i in tqdm(range(steps + 1), desc="alternating train steps"):
+        order = list(policies.items())
+        for name, policy in order if i % 2 else order[::-1]:
+            if device == "cuda":
+                torch.cuda.synchronize()
+            start = time.perf_counter()
+            loss, _ = policy.forward(batch)
+            optimizers[name].zero_grad()
+            loss.backward()
+            optimizers[name].step()
+            if device == "cuda":
+                torch.cuda.synchronize()
+            if i > 0:  # the first step warms up allocators and kernels
+                times[name].append(time.perf_counter() - start)
+    return {name: statistics.median(t) for name, t in times.items()}
+
+
+def parse_overrides(parser: argparse.ArgumentParser, option: str, items: list[str]) -> dict:
+    overrides = {}
+    for item in items:
+        field, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            overrides[field] = json.loads(value)
+        except ValueError:
+            parser.error(f"{option}: expected FIELD=JSON, got {item!r}")
+    return overrides
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -180,15 +236,26 @@ def main() -> None:
         metavar="FIELD=JSON",
         help="override an OmniDConfig field, e.g. --omnid checkpoint_backbone=true (repeatable)",
     )
+    parser.add_argument(
+        "--against",
+        action="append",
+        default=[],
+        metavar="FIELD=JSON",
+        help="time OmniD with these OmniDConfig fields against the profile's OmniD (steps alternating)",
+    )
     args = parser.parse_args()
 
     base = PROFILES[args.profile]
-    overrides = {}
-    for item in args.omnid:
-        field, sep, value = item.partition("=")
-        if not sep:
-            parser.error(f"--omnid: expected FIELD=JSON, got {item!r}")
-        overrides[field] = json.loads(value)
+    overrides = parse_overrides(parser, "--omnid", args.omnid)
+    if args.against:
+        against = parse_overrides(parser, "--against", args.against)
+        medians = alternating_steps(base, against, args.device, args.repeats)
+        print(f"profile={args.profile} device={args.device} image={base.image_size} batch={base.batch_size}")
+        for name, median in medians.items():
+            print(f"{name:50s} train step {median:7.3f} s (median of {args.repeats})")
+        a, b = medians.values()
+        print(f"ratio B / A: {b / a:.2f}")
+        return
     profile = Profile(
         base.image_size, base.batch_size, {**base.omnid, **overrides}, base.diffusion, base.inference_steps
     )

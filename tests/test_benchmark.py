@@ -22,8 +22,6 @@ from omnid_testing import tiny_diffusion_config
 
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import checkpoint_cameras
-from lerobot_omnid.benchmark.charts import bar_chart, position_curve_chart
-from lerobot_omnid.benchmark.commands import CHECKPOINT
 from lerobot_omnid.benchmark.outputs import BANDS_CM
 from lerobot_omnid.benchmark.plan import (
     ABLATIONS,
@@ -42,7 +40,11 @@ from lerobot_omnid.benchmark.plan import (
     build_plan,
     control_setting,
 )
-from lerobot_omnid.benchmark.report import (
+from lerobot_omnid.calibration.rig_file import load_calibration_file
+from lerobot_omnid.measure import engine
+from lerobot_omnid.measure.charts import bar_chart, position_curve_chart
+from lerobot_omnid.measure.engine import CHECKPOINT, is_done
+from lerobot_omnid.measure.report import (
     ablation_table,
     comparison_table,
     controls_table,
@@ -53,11 +55,8 @@ from lerobot_omnid.benchmark.report import (
     offline_table,
     raw_table,
 )
-from lerobot_omnid.benchmark.results import EvalEntry, EvalRecord, collect, record_of
-from lerobot_omnid.benchmark.stats import fisher_exact
-from lerobot_omnid.calibration.rig_file import load_calibration_file
-from lerobot_omnid.measure import engine
-from lerobot_omnid.measure.engine import is_done
+from lerobot_omnid.measure.results import EvalEntry, EvalRecord, collect, record_of
+from lerobot_omnid.measure.stats import fisher_exact
 
 LABELS = bench.LABELS
 

@@ -34,7 +34,7 @@ from lerobot.policies.vqbet.configuration_vqbet import VQBeTConfig
 from lerobot.scripts.lerobot_eval import rollout
 from omnid_testing import tiny_config
 
-from lerobot_omnid.benchmark import demo
+from lerobot_omnid.benchmark import demo, rigs_and_wrist
 from lerobot_omnid.benchmark.commands import record_command
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, build_plan
 from lerobot_omnid.calibration.frame_columns import (
@@ -48,9 +48,6 @@ from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 from lerobot_omnid.record import build_parser, main, record_dataset
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-import rigs_and_wrist
 
 SIZE = 32
 CAMERA = "cam_b"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
 PACKAGE = ROOT / "lerobot_omnid"
-WINGS = ("policy", "calibration", "benchmark", "viz")
+WINGS = ("policy", "calibration", "measure", "benchmark", "diagnostics", "viz")
 
 
 def unit_of(module: str) -> str:

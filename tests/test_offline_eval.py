@@ -12,8 +12,8 @@ from gym_omnid.rotations import rot6d_from_matrix, topdown_rotation
 from lerobot.policies import make_pre_post_processors
 from omnid_testing import make_tiny_dataset, tiny_config
 
-from lerobot_omnid.benchmark.offline_eval import action_errors, evaluate_offline, main, rotation_angle_deg
 from lerobot_omnid.calibration.attach_calibration import main as attach_calibration
+from lerobot_omnid.diagnostics.offline_eval import action_errors, evaluate_offline, main, rotation_angle_deg
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 

@@ -1,18 +1,14 @@
-"""benchmarks/position_extrapolation.py: the ridge probe extrapolates a linear representation and not a
-saturating one, and the image condition it reads from LeRobot's DP."""
+"""The position probe (lerobot_omnid.diagnostics.position_extrapolation): the ridge probe extrapolates a
+linear representation and not a saturating one, and the image condition it reads from LeRobot's DP."""
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import pytest
 import torch
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
 from omnid_testing import tiny_diffusion_config
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-import position_extrapolation as pe
+from lerobot_omnid.diagnostics import position_extrapolation as pe
 
 
 def _representation(xy: torch.Tensor, saturate: bool) -> torch.Tensor:

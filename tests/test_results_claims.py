@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_omnid.benchmark.results import EvalRecord, check_comparable, collect, merge, read_summary
-from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
+from lerobot_omnid.measure.results import EvalRecord, check_comparable, collect, merge, read_summary
+from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"

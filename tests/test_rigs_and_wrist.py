@@ -1,14 +1,13 @@
-"""The commands of ``benchmarks/rigs_and_wrist.py`` (issue 19's measurements): each pair differs only where
-it should, and every evaluation gives the policy the evaluated rig's own calibration."""
+"""The rigs-and-wrist protocol: each pair differs only where it should, and every evaluation gives the policy
+the evaluated rig's own calibration."""
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-import rigs_and_wrist as rw
+from lerobot_omnid.benchmark import rigs_and_wrist as rw
+from lerobot_omnid.measure import engine
 
 OUT = Path("out")
 
@@ -54,13 +53,16 @@ def test_report_gives_each_evaluation_its_own_commit_and_tests_the_pairs(tmp_pat
         ("two_rigs", "higher", "id", False): (7, "aaa"),
         ("one_rig", "higher", "id", False): (4, "bbb"),
     }
+    checkpoints = {m: tmp_path / "train" / m / "ck" for m in rw.MODELS}
+    runs = rw.protocol(tmp_path, checkpoints, {}, 30)
+    by_output = {run.output: run for run in runs}
     for (model, rig, layout, blind), (successes, commit) in finished.items():
         folder = rw.eval_dir(tmp_path, model, rig, layout, blind)
         folder.mkdir(parents=True)
         overall = {"pc_success": 100 * successes / 30, "n_episodes": 30}
         (folder / "eval_info.json").write_text(json.dumps({"overall": overall}))
-        (folder / rw.commands.COMMIT_FILE).write_text(commit + "\n")
-    rw.report(tmp_path, 30, {})
+        engine.write_stamp(by_output[folder], commit, 1.0)
+    rw.report(tmp_path, 30, {}, runs)
     rows = json.loads((tmp_path / "summary.json").read_text())["results"]
     assert {(r["model"], r["successes"], r["commit"]) for r in rows} == {
         ("two_rigs", 7, "aaa"),

@@ -24,7 +24,6 @@ from omnid_jobs import Job, job
 from omnid_testing import TINY_POLICY_FLAGS
 
 from lerobot_omnid.benchmark import robustness
-from lerobot_omnid.benchmark.results import CellResult
 from lerobot_omnid.benchmark.robustness_plan import (
     LEVELS,
     Cell,
@@ -51,6 +50,7 @@ from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure import engine
+from lerobot_omnid.measure.results import CellResult
 
 SIZE = 64
 

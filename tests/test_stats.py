@@ -1,4 +1,4 @@
-"""lerobot_omnid.benchmark.stats against published values (SciPy is not installed here, so the sources are
+"""lerobot_omnid.measure.stats against published values (SciPy is not installed here, so the sources are
 cited) and against the definitions."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from lerobot_omnid.benchmark.stats import Z_95, fisher_exact, rate_difference, wilson_interval
+from lerobot_omnid.measure.stats import Z_95, fisher_exact, rate_difference, wilson_interval
 
 
 @pytest.mark.parametrize(

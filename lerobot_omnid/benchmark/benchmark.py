@@ -27,7 +27,6 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from lerobot_omnid.benchmark import results
 from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs
 from lerobot_omnid.benchmark.plan import (
     LABELS,
@@ -39,6 +38,7 @@ from lerobot_omnid.benchmark.plan import (
     build_plan,
 )
 from lerobot_omnid.cli import csv_of, int_at_least
+from lerobot_omnid.measure import results
 from lerobot_omnid.measure.engine import code_commit, describe_plan, execute, is_done, state
 
 OVERRIDES = {  # option: (profile field, minimum)

@@ -1,31 +1,19 @@
-"""Command lines of the real console tools (``omnid-record``, ``lerobot-train``, ``lerobot-eval``), checks of
-what a finished one leaves behind, and a logged subprocess runner. Shared by the main job (``omnid-demo``,
-:mod:`lerobot_omnid.benchmark.demo`) and the benchmark (``omnid-benchmark``,
-:mod:`lerobot_omnid.benchmark.benchmark`).
-"""
+"""Command lines of the real console tools (``omnid-record``, ``lerobot-train``, ``lerobot-eval``) that every
+protocol plans (the benchmark, robustness, the main job, readout selection, rigs and wrist); the engine
+(:mod:`lerobot_omnid.measure.engine`) runs them."""
 
 from __future__ import annotations
 
 import json
-import shutil
-import subprocess
 import sys
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 from gym_omnid import WORKSPACE_BOUNDS
-from tqdm import tqdm
 
 BIN = Path(sys.executable).parent
 SIM_VOLUME_BOUNDS = json.dumps(WORKSPACE_BOUNDS, separators=(",", ":"))
 """``--policy.volume_bounds`` of the benchmark's OmniD runs: the envs' workspace, which holds every object."""
-CHECKPOINT = Path("checkpoints") / "last" / "pretrained_model"
-"""Where ``lerobot-train`` leaves the final checkpoint, relative to its ``--output_dir``."""
-COMMIT_FILE = "commit.txt"
-"""Beside an evaluation's ``eval_info.json`` (scripts under ``benchmarks/``): the code commit that ran it."""
-Step = tuple[str, list[str], Path]
-"""A resumable run of a script: its name (``<kind>/...``), its command line and the folder it writes."""
 
 
 def json_list(items: Sequence[str]) -> str:
@@ -161,65 +149,3 @@ def recorded_episodes(root: Path) -> int:
     """Episodes in the dataset at ``root`` (0 when there is none)."""
     info = root / "meta" / "info.json"
     return json.loads(info.read_text()).get("total_episodes", 0) if info.is_file() else 0
-
-
-def is_trained(output_dir: Path) -> bool:
-    """Whether ``lerobot-train --output_dir=output_dir`` finished (its final checkpoint is saved)."""
-    return (output_dir / CHECKPOINT / "model.safetensors").is_file()
-
-
-def is_evaluated(output_dir: Path) -> bool:
-    return (output_dir / "eval_info.json").is_file()
-
-
-def run_logged(cmd: Sequence[str], log_path: Path, on_line: Callable[[str], object] | None = None) -> int:
-    """Run ``cmd``, writing the command and its output (stdout and stderr) to ``log_path``; each line is
-    also passed to ``on_line``. Returns the exit code."""
-    log_path.parent.mkdir(parents=True, exist_ok=True)
-    with (
-        open(log_path, "w") as log,
-        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1) as proc,
-    ):
-        log.write(" ".join(cmd) + "\n")
-        for line in proc.stdout:
-            log.write(line)
-            if on_line is not None:
-                on_line(line)
-    return proc.returncode
-
-
-def run_stage(name: str, cmd: list[str], logs: Path) -> float:
-    """Run one command, mirroring its output to the terminal and to ``logs/<name>.log``; seconds taken.
-    Exits the program when the command fails."""
-    start = time.perf_counter()
-    returncode = run_logged(cmd, logs / f"{name}.log", on_line=sys.stdout.write)
-    if returncode != 0:
-        raise SystemExit(f"stage '{name}' failed (exit code {returncode}); see {logs / f'{name}.log'}")
-    return time.perf_counter() - start
-
-
-def run_steps(
-    steps: Sequence[Step],
-    out: Path,
-    desc: str,
-    is_done: Callable[[str, Path], bool],
-    commit: str | None,
-) -> None:
-    """Run in order each step whose folder ``is_done(kind, folder)`` says is unfinished (kind: the name up to
-    its first ``/``), under a progress bar; an unfinished folder is removed first, so a run is never resumed
-    half-way. Each log goes to ``<out>/logs/``; an ``eval`` step's folder gets ``COMMIT_FILE``. Exits naming
-    the step and its log when a command fails."""
-    bar = tqdm(steps, desc=desc, unit="run")
-    for name, cmd, target in bar:
-        kind = name.split("/")[0]
-        if is_done(kind, target):
-            continue
-        if target.exists():
-            shutil.rmtree(target)
-        bar.set_postfix_str(name)
-        log = out / "logs" / f"{name.replace('/', '__')}.log"
-        returncode = run_logged(cmd, log)
-        if returncode != 0:
-            raise SystemExit(f"{name} failed (exit code {returncode}); see {log}")
-        if kind == "eval" and commit is not None:
-            (target / COMMIT_FILE).write_text(commit + "\n")

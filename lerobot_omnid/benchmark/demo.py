@@ -22,7 +22,6 @@ from pathlib import Path
 from gym_omnid import TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark.commands import (
-    CHECKPOINT,
     SIM_VOLUME_BOUNDS,
     control_calibration_command,
     env_cameras,
@@ -32,10 +31,10 @@ from lerobot_omnid.benchmark.commands import (
 )
 from lerobot_omnid.benchmark.commands import train_command as train_command_base
 from lerobot_omnid.benchmark.plan import MINI, BenchmarkProfile, control_flags, method_flags
-from lerobot_omnid.benchmark.results import read_eval_info
-from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference, wilson_interval
 from lerobot_omnid.cli import positive_int
-from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, plan
+from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, plan
+from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.stats import fisher_exact, rate_difference, wilson_interval
 
 EVAL_BATCH_SIZE = 5  # envs each lerobot-eval runs at once: faster than one, the same env seeds
 BLIND = "id_blind"  # the ID evaluation under the blind control

@@ -1,7 +1,7 @@
 """What ``omnid-benchmark`` writes from the finished runs of its plan: ``summary.json`` (this folder's
 evaluations), ``report.md`` (settings, the paper's tables with Wilson intervals, OmniD against each method
 with Fisher tests, the controls, the position-shift curve, the open-loop diagnostic, every run),
-``benchmark.png`` and ``position_curve.png`` (:mod:`lerobot_omnid.benchmark.charts`) and ``results.json``.
+``benchmark.png`` and ``position_curve.png`` (:mod:`lerobot_omnid.measure.charts`) and ``results.json``.
 Results of other folders (their ``summary.json``, e.g. copied under ``docs/results/``) are merged in.
 """
 
@@ -14,7 +14,6 @@ from pathlib import Path
 
 from gym_omnid.constants import POSITION_BANDS, TRAIN_CAMERAS
 
-from lerobot_omnid.benchmark import charts, report, results
 from lerobot_omnid.benchmark.plan import (
     ABLATIONS,
     BACKGROUND_OODS,
@@ -42,8 +41,9 @@ from lerobot_omnid.benchmark.plan import (
     method_flags,
     seed_folder,
 )
-from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference
+from lerobot_omnid.measure import charts, report, results
 from lerobot_omnid.measure.engine import Run, is_done, stamp_commit
+from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
 BANDS_CM = {band: (100 * low, 100 * high) for band, (low, high) in POSITION_BANDS.items()}
 """The graded position bands: distance outside the training square, cm."""

@@ -31,7 +31,7 @@ from lerobot_omnid.benchmark.commands import (
     record_command,
     train_command,
 )
-from lerobot_omnid.benchmark.commands import CHECKPOINT as CHECKPOINT_SUBDIR
+from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.measure.engine import Run, plan
 
 METHODS = ("omnid", "diffusion", "act", "vqbet")
@@ -220,7 +220,7 @@ def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
                     "--policy.plane_readout=keypoints",
                     "short run: the plane is read out as 16 soft-argmax keypoints in the base frame instead "
                     "of flattened (the paper's), selected on validation seeds among five readouts "
-                    "(benchmarks/readout_selection.py; numbers in docs/results.md)",
+                    "(lerobot_omnid/benchmark/readout_selection.py; numbers in docs/results.md)",
                 ),
                 ("--policy.compressed_channels=16", "see plane_readout: 16 keypoints"),
             ]

@@ -47,9 +47,9 @@ from lerobot_omnid.benchmark.plan import (
     method_flags,
     setting_env,
 )
-from lerobot_omnid.benchmark.results import read_eval_info
-from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
-from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done, plan
+from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
+from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 PROFILE = PROFILES["mini"]
@@ -84,7 +84,7 @@ def train(out: Path, data: Path, readout: str, device: str) -> list[str]:
 
 
 def checkpoint(out: Path, readout: str) -> Path:
-    return out / "train" / readout / commands.CHECKPOINT
+    return out / "train" / readout / CHECKPOINT
 
 
 def eval_dir(out: Path, phase: str, readout: str, setting: str, control: str = "") -> Path:

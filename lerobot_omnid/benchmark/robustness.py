@@ -37,7 +37,6 @@ from gym_omnid.constants import CAMERAS, MAX_EPISODE_STEPS, TASKS
 
 from lerobot_omnid.benchmark.control_calibration import control_calibrations
 from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, TASK0
-from lerobot_omnid.benchmark.results import read_eval_info
 from lerobot_omnid.benchmark.robustness_plan import (
     CONTROLS,
     DRAW_SEED_STRIDE,
@@ -68,6 +67,7 @@ from lerobot_omnid.benchmark.robustness_report import (
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.cli import csv_of, int_at_least
 from lerobot_omnid.measure.engine import code_commit, describe_plan, execute, is_done
+from lerobot_omnid.measure.results import read_eval_info
 
 COMPARISON_CHART = "robustness_comparison.png"
 """The checkpoints' curves side by side (written when more than one has results)."""

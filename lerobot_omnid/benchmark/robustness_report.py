@@ -15,10 +15,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lerobot_omnid.benchmark.charts import error_bars, pyplot
-from lerobot_omnid.benchmark.results import CellResult
 from lerobot_omnid.benchmark.robustness_plan import CONTROLS, DEAD, LABELS, Cell
-from lerobot_omnid.benchmark.stats import fisher_exact, rate_difference
+from lerobot_omnid.measure.charts import error_bars, pyplot
+from lerobot_omnid.measure.results import CellResult
+from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
 ANY_CAMERA = "any one"
 """The perturbation column of a dead-camera variant pooled over its cameras."""

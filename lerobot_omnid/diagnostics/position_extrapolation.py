@@ -17,7 +17,7 @@ representation: the mean distance between twins relative to the spread of the va
 scrambles the object's position as much as a new layout would.
 
     B=outputs/bench_mini_dp30 C=checkpoints/last/pretrained_model
-    python benchmarks/position_extrapolation.py --out outputs/position_extrapolation \\
+    python -m lerobot_omnid.diagnostics.position_extrapolation --out outputs/position_extrapolation \\
         --train-root $B/data/select_apple_bcde \\
         --checkpoint omnid=$B/train/omnid/select_apple/$C \\
         --checkpoint diffusion=$B/train/diffusion/select_apple/$C [--tables ood1,ood2,ood3,ood4]
@@ -42,8 +42,8 @@ from torch import Tensor
 from tqdm import tqdm
 
 from lerobot_omnid.benchmark.commands import record_command, recorded_episodes
-from lerobot_omnid.benchmark.offline_eval import GRIPPER, POSITION, load_policy
 from lerobot_omnid.benchmark.plan import TASK0
+from lerobot_omnid.diagnostics.offline_eval import GRIPPER, POSITION, load_policy
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX
 
 FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest): the object is unmoved

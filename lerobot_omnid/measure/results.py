@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lerobot_omnid.benchmark.stats import Estimate, wilson_interval
+from lerobot_omnid.measure.stats import Estimate, wilson_interval
 
 Key = tuple[str, str, str]
 """(model, task, setting): a table cell. model: a method, an ablation or a method whose fine-tuned model

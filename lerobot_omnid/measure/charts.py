@@ -7,8 +7,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
 
-from lerobot_omnid.benchmark.report import ABLATION_COLUMNS, task_title
-from lerobot_omnid.benchmark.results import CellResult, Key
+from lerobot_omnid.measure.report import ABLATION_COLUMNS, task_title
+from lerobot_omnid.measure.results import CellResult, Key
 
 
 def pyplot() -> ModuleType:

@@ -1,7 +1,7 @@
 """Can OmniD's image encoder learn where the object is? A direct regression probe, no diffusion head.
 
     B=outputs/benchmark_mini
-    python benchmarks/position_probe.py --root $B/data/select_apple_bcde \\
+    python -m lerobot_omnid.diagnostics.position_probe --root $B/data/select_apple_bcde \\
         --config $B/train/omnid/select_apple/checkpoints/last/pretrained_model \\
         --set plane_readout=\\"keypoints\\" --set compressed_channels=16
 
@@ -23,10 +23,10 @@ from pathlib import Path
 
 import torch
 from lerobot.configs.policies import PreTrainedConfig
-from position_extrapolation import probe_frames
 from torch import Tensor, nn
 from tqdm import tqdm
 
+from lerobot_omnid.diagnostics.position_extrapolation import probe_frames
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 FRAMES = range(0, 21, 4)  # before any expert grasp in distribution (the first close is at frame 22 or later)

@@ -2,8 +2,8 @@
 interval, OmniD against each other method with Fisher's exact test, each method against its controls, the
 position-shift curve and its area.
 
-Pure functions of their arguments: pooled cells (:func:`lerobot_omnid.benchmark.results.collect`) or the
-evaluation records themselves (:class:`lerobot_omnid.benchmark.results.EvalRecord`), plus reading the given
+Pure functions of their arguments: pooled cells (:func:`lerobot_omnid.measure.results.collect`) or the
+evaluation records themselves (:class:`lerobot_omnid.measure.results.EvalRecord`), plus reading the given
 open-loop diagnostic files. Rates are printed in %, differences in percentage points (pp).
 """
 
@@ -13,8 +13,8 @@ import json
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-from lerobot_omnid.benchmark.results import CellResult, EvalEntry, EvalRecord, Key, collect, train_seeds
-from lerobot_omnid.benchmark.stats import Estimate, fisher_exact, rate_difference
+from lerobot_omnid.measure.results import CellResult, EvalEntry, EvalRecord, Key, collect, train_seeds
+from lerobot_omnid.measure.stats import Estimate, fisher_exact, rate_difference
 
 MISSING = "—"
 HOLD_LABEL = "(holding the measured pose)"

@@ -1,7 +1,7 @@
 """Does a policy use its cameras? The change of its action when it is given another episode's images.
 
     B=outputs/benchmark_mini
-    python benchmarks/image_use.py --root $B/data/select_apple_bcde \\
+    python -m lerobot_omnid.diagnostics.image_use --root $B/data/select_apple_bcde \\
         --checkpoint $B/train/omnid/select_apple/checkpoints/last/pretrained_model
 
 For each of the first ``--episodes`` episodes of a gym_omnid dataset, frame ``--frame`` goes through the
@@ -24,7 +24,7 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 from lerobot.utils.constants import ACTION, OBS_STATE
 
-from lerobot_omnid.benchmark.offline_eval import POSITION, load_policy
+from lerobot_omnid.diagnostics.offline_eval import POSITION, load_policy
 
 
 def chunk_action(

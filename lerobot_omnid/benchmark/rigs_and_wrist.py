@@ -14,11 +14,11 @@ seed:
 Every model also gets a blind control in distribution: every camera black (``--env.blackout_cameras``), so
 only the state drives it. ``--one-rig-checkpoint`` takes an OmniD trained by ``omnid-benchmark`` (the same
 50 scenes and options, calibration in the feature info) instead of training ``one_rig`` here; it is then
-told to read the env's per-frame calibration (``--policy.frame_calibration``). Resumable like the benchmark;
-writes ``<out>/report.md`` (Wilson 95 % intervals, Fisher tests of each pair, the code commit of each
-evaluation, kept beside it in ``commit.txt``) and ``<out>/summary.json``.
+told to read the env's per-frame calibration (``--policy.frame_calibration``). Runs on the experiment
+engine (resumable, ``--dry-run`` prints every command); writes ``<out>/report.md`` (Wilson 95 % intervals,
+Fisher tests of each pair, the code commit of each evaluation, from its stamp) and ``<out>/summary.json``.
 
-    MUJOCO_GL=egl python benchmarks/rigs_and_wrist.py --out outputs/rigs_and_wrist \\
+    MUJOCO_GL=egl python -m lerobot_omnid.benchmark.rigs_and_wrist --out outputs/rigs_and_wrist \\
         --one-rig-checkpoint outputs/bench_mini/train/omnid/select_apple/checkpoints/last/pretrained_model
 """
 
@@ -31,11 +31,20 @@ from pathlib import Path
 from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
 
 from lerobot_omnid.benchmark import commands
-from lerobot_omnid.benchmark.benchmark import code_commit
 from lerobot_omnid.benchmark.plan import BANDS, PROFILES, TRAIN_SEED, method_flags
-from lerobot_omnid.benchmark.results import read_eval_info
-from lerobot_omnid.benchmark.stats import fisher_exact, wilson_interval
 from lerobot_omnid.keys import image_key
+from lerobot_omnid.measure.engine import (
+    CHECKPOINT,
+    Run,
+    code_commit,
+    describe_plan,
+    execute,
+    is_done,
+    plan,
+    stamp_commit,
+)
+from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 
 TASK = "select_apple"
 PROFILE = PROFILES["mini"]
@@ -127,15 +136,6 @@ def eval_dir(out: Path, model: str, rig: str, layout: str, blind: bool) -> Path:
     return out / "eval" / model / f"{rig}_{layout}{'_blind' if blind else ''}"
 
 
-def is_done(kind: str, target: Path) -> bool:
-    """Whether the run of ``kind`` that writes ``target`` finished (a record run: all its episodes)."""
-    if kind == "record":
-        return commands.recorded_episodes(target) == DATASETS[target.name][2]
-    if kind == "merge":
-        return (target / "meta" / "info.json").is_file()
-    return commands.is_trained(target) if kind == "train" else commands.is_evaluated(target)
-
-
 def cells() -> list[tuple[str, str, str, bool]]:
     """(model, rig, layout, blind) of every evaluation."""
     return [(m, r, lay, False) for m, ev in EVALS.items() for r, lay in ev] + [
@@ -143,16 +143,17 @@ def cells() -> list[tuple[str, str, str, bool]]:
     ]
 
 
-def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
+def report(out: Path, episodes: int, checkpoints: dict[str, Path], runs: list[Run]) -> None:
+    """``report.md`` and ``summary.json`` from the evaluations of ``runs`` done for this plan."""
+    done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
     counts = {}
     for model, rig, layout, blind in cells():
-        info = eval_dir(out, model, rig, layout, blind) / "eval_info.json"
-        if info.is_file():
-            counts[model, rig, layout, blind] = read_eval_info(info)
+        folder = eval_dir(out, model, rig, layout, blind)
+        if folder in done:
+            counts[model, rig, layout, blind] = read_eval_info(folder / "eval_info.json")
     rows = []
     for (model, rig, layout, blind), (s, n) in counts.items():
         est = wilson_interval(s, n)
-        commit_file = eval_dir(out, model, rig, layout, blind) / commands.COMMIT_FILE
         rows.append(
             {
                 "model": model,
@@ -164,7 +165,7 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
                 "rate": est.value,
                 "low": est.low,
                 "high": est.high,
-                "commit": commit_file.read_text().strip() if commit_file.is_file() else None,
+                "commit": stamp_commit(done[eval_dir(out, model, rig, layout, blind)]),
             }
         )
     commits = ", ".join(sorted({str(r["commit"]) for r in rows})) or "none"
@@ -201,39 +202,51 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path]) -> None:
     print("\n".join(lines))
 
 
-def main() -> None:
+def protocol(out: Path, checkpoints: dict[str, Path], given: dict[str, Path], episodes: int) -> list[Run]:
+    """Record, merge, train (what is not given), evaluate every cell."""
+    recorded = [d for d in DATASETS if d != "default_bcde" or "one_rig" not in given]
+    runs = [Run(f"record/{d}", "record", tuple(record(out, d)), out / "data" / d) for d in recorded]
+    halves = ("record/default_bcde_half", "record/closer_bcde_half")
+    runs.append(Run("merge/two_rigs", "merge", tuple(merge(out)), out / "data" / "two_rigs", halves))
+    data_run = {"default_bcde": "record/default_bcde", "two_rigs": "merge/two_rigs"}
+    data_run["default_wrist"] = "record/default_wrist"
+    for m in MODELS:
+        if m not in given:
+            runs.append(
+                Run(f"train/{m}", "train", tuple(train(out, m)), out / "train" / m, (data_run[MODELS[m][0]],))
+            )
+    for m, r, lay, b in cells():
+        folder = eval_dir(out, m, r, lay, b)
+        cmd = evaluate(out, m, checkpoints[m], r, lay, episodes, b)
+        needs = () if m in given else (f"train/{m}",)
+        inputs = (given[m] / "model.safetensors", given[m] / "config.json") if m in given else ()
+        runs.append(Run(f"eval/{m}/{folder.name}", "eval", tuple(cmd), folder, needs, inputs=inputs))
+    return plan(runs, out)
+
+
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", type=Path, default=Path("outputs/rigs_and_wrist"))
     parser.add_argument("--one-rig-checkpoint", type=Path, help="a mini OmniD pretrained_model folder")
     parser.add_argument("--eval-episodes", type=int, default=30, help="episodes per cell (default 30)")
+    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
     parser.add_argument("--report-only", action="store_true")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     out = args.out.resolve()
     given = {"one_rig": args.one_rig_checkpoint.resolve()} if args.one_rig_checkpoint else {}
     for path in given.values():
         if not (path / "config.json").is_file():
             parser.error(f"--one-rig-checkpoint: expected a folder with a config.json, got {path}")
-    checkpoints = {m: given.get(m, out / "train" / m / commands.CHECKPOINT) for m in MODELS}
+    checkpoints = {m: given.get(m, out / "train" / m / CHECKPOINT) for m in MODELS}
+    runs = protocol(out, checkpoints, given, args.eval_episodes)
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return
     if not args.report_only:
-        steps = [
-            (f"record/{d}", record(out, d), out / "data" / d)
-            for d in DATASETS
-            if d != "default_bcde" or "one_rig" not in given
-        ]
-        steps.append(("merge/two_rigs", merge(out), out / "data" / "two_rigs"))
-        steps += [(f"train/{m}", train(out, m), out / "train" / m) for m in MODELS if m not in given]
-        steps += [
-            (
-                f"eval/{m}/{eval_dir(out, m, r, lay, b).name}",
-                evaluate(out, m, checkpoints[m], r, lay, args.eval_episodes, b),
-                eval_dir(out, m, r, lay, b),
-            )
-            for m, r, lay, b in cells()
-        ]
-        commands.run_steps(steps, out, "rigs_and_wrist", is_done, code_commit())
-    report(out, args.eval_episodes, given)
+        execute(runs, out, commit=code_commit(), desc="rigs_and_wrist", stop_on_failure=True)
+    report(out, args.eval_episodes, given, runs)
 
 
 if __name__ == "__main__":
