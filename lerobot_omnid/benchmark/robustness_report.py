@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from lerobot_omnid.benchmark.robustness_plan import CONTROLS, DEAD, LABELS, Cell
-from lerobot_omnid.measure.charts import error_bars, pyplot
+from lerobot_omnid.measure.charts import error_bars, pyplot, save_figure
 from lerobot_omnid.measure.results import CellResult
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
@@ -356,11 +356,7 @@ def robustness_chart(label: str, rows: Sequence[Row], path: Path) -> Path:
         xlim=(-0.5, max(len(cameras), 1) - 0.5),
     )
     ax_dead.legend(fontsize="small")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def comparison_chart(rows_by_label: Mapping[str, Sequence[Row]], path: Path) -> Path:
@@ -401,8 +397,4 @@ def comparison_chart(rows_by_label: Mapping[str, Sequence[Row]], path: Path) -> 
         ax.set_ylim(-2, 105)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize="small", title="dotted: blind control", title_fontsize="x-small")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

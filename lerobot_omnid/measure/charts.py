@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 from lerobot_omnid.measure.report import ABLATION_COLUMNS, task_title
 from lerobot_omnid.measure.results import CellResult, Key
@@ -19,6 +20,15 @@ def pyplot() -> ModuleType:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig: Any, path: Path) -> Path:
+    """Lay out a pyplot figure, write it as a PNG to ``path`` (folders made), close it; returns ``path``."""
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    pyplot().close(fig)
+    return path
 
 
 def error_bars(cells: Sequence[CellResult]) -> list[list[float]]:
@@ -73,11 +83,7 @@ def bar_chart(
         ax.bar(range(len(ablation)), [c.rate for c in cells], 0.5, yerr=error_bars(cells), capsize=2)
         ax.set_xticks(range(len(ablation)), [title for title, _ in ablation])
         ax.set(title=f"OmniD ablation, {task_title(task0)} ID", ylabel="success (%)", ylim=(0, 105))
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def position_curve_chart(
@@ -124,8 +130,4 @@ def position_curve_chart(
         xlim=(edges[0], edges[-1]),
     )
     ax.legend(fontsize="small")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
