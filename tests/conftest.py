@@ -1,52 +1,69 @@
-"""Fixtures shared by the tests; helpers in ``omnid_testing.py``, background jobs in ``omnid_jobs.py``."""
+"""Settings shared by every test, and the guard that keeps subprocesses in ``tests/e2e``; helpers in
+``omnid_testing.py`` and ``calibration_testing.py``.
+
+The tests that start a subprocess (a console command, an example script, ``python -c``) live in
+``tests/e2e``, whose conftest marks them ``e2e``; anywhere else ``subprocess.Popen`` raises, so that
+``make test-fast`` (``-m "not e2e"``) starts none and a new test that starts one fails until it moves.
+"""
 
 import os
+import subprocess
 
-# One torch (OpenMP) thread, here and in every command the tests start: their models are tiny, and on a
-# shared 2-core machine a second thread mostly waits for a core (a tiny OmniD's select_action: 0.1 s with
-# one thread, 0.9 s with two on a busy machine). Set OMP_NUM_THREADS to choose otherwise.
+# One torch (OpenMP) thread, here, in every pytest-xdist worker (each imports this file) and in every
+# command the tests start: their models are tiny, and on a shared 2-core machine a second thread mostly
+# waits for a core (a tiny OmniD's select_action: 0.1 s with one thread, 0.9 s with two on a busy
+# machine). Set OMP_NUM_THREADS to choose otherwise.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import pytest
 import torch
-from omnid_jobs import JobRunner
 
 torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line(
-        "markers", "jobs(*names): the test reads these background jobs (tests/omnid_jobs.py)"
-    )
+class SubprocessOutsideE2E(RuntimeError):
+    """A test outside ``tests/e2e`` started a subprocess."""
+
+
+class _RefusedPopen(subprocess.Popen):
+    """``subprocess.Popen`` (and so ``run``, ``check_output``) outside ``tests/e2e``: raises, naming the
+    command. A subclass, so that ``isinstance`` checks and subclasses of ``Popen`` keep working."""
+
+    def __init__(self, args, *unused, **unused_kwargs) -> None:
+        raise SubprocessOutsideE2E(f"this test starts a subprocess: move it to tests/e2e (command: {args!r})")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Tests that read background jobs run last, in their order: their jobs run meanwhile."""
-    items.sort(key=lambda item: item.get_closest_marker("jobs") is not None)  # stable
+    """The slow tests first, then the other e2e tests, then the rest (each kept in its order): with
+    ``--dist loadgroup --no-loadscope-reorder`` pytest-xdist hands the work out in this order, so the long
+    end-to-end runs start at once and the short in-process tests fill the workers up at the end."""
+    items.sort(key=lambda item: (not item.get_closest_marker("slow"), not item.get_closest_marker("e2e")))
 
 
-@pytest.fixture(scope="session", autouse=True)
-def jobs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory):
-    """The session's :class:`omnid_jobs.JobRunner`; starts the jobs of the selected tests."""
-    runner = JobRunner(lambda name: tmp_path_factory.mktemp(name))
-    runner.start_early(
-        [name for item in request.session.items for mark in item.iter_markers("jobs") for name in mark.args]
-    )
-    yield runner
-    runner.close()
-    request.config.stash[_TIMINGS] = runner.timings()
+@pytest.hookimpl(tryfirst=True)  # before its fixtures start the group's commands
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Under pytest-xdist's ``--dist=loadgroup``, fail a test of an ``xdist_group`` whose id lacks its group:
+    xdist keeps a group on one worker through that suffix, which pytest 9.2 drops, so the group would
+    silently spread over the workers and each would run its commands again."""
+    grouped = item.get_closest_marker("xdist_group") is not None
+    if grouped and getattr(item.config.option, "loadgroup", False) and "@" not in item.nodeid:
+        pytest.fail(
+            "pytest-xdist did not keep this test's xdist_group on one worker: this pytest and pytest-xdist "
+            "do not work together with --dist=loadgroup; install the versions pyproject.toml asks for",
+            pytrace=False,
+        )
 
 
-_TIMINGS = pytest.StashKey[dict]()
-
-
-def pytest_terminal_summary(terminalreporter, config: pytest.Config) -> None:
-    timings = config.stash.get(_TIMINGS, {})
-    if timings:
-        terminalreporter.section("background jobs (wall s / of which its commands ran s)")
-        for name, (wall, busy) in sorted(timings.items(), key=lambda kv: -kv[1][0]):
-            terminalreporter.write_line(f"{wall:7.1f} {busy:7.1f}  {name}")
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None):
+    """Refuse subprocesses through a non-e2e test's whole protocol: its fixtures' setup and teardown too,
+    module-scoped ones included (an autouse fixture would start after those)."""
+    if item.get_closest_marker("e2e"):
+        return (yield)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(subprocess, "Popen", _RefusedPopen)
+        return (yield)
 
 
 @pytest.fixture(autouse=True)

@@ -1,16 +1,24 @@
-"""Shared test helpers: synthetic calibrated cameras, tiny OmniD configs and datasets.
+"""Shared test helpers: synthetic calibrated cameras, tiny OmniD configs, datasets and checkpoint folders,
+plans of the experiment engine; importable from every test folder (pytest's ``pythonpath = ["tests"]``).
 
-A plain module (not conftest.py): ``tests/envs`` has a conftest of its own, and ``from conftest import``
+A plain module (not conftest.py): several folders have a conftest of their own, and ``from conftest import``
 would resolve to whichever was imported first.
 """
 
 from __future__ import annotations
 
+import json
+import sys
+from pathlib import Path
+
 import torch
+from gym_omnid import TRAIN_CAMERAS, WORKSPACE_BOUNDS
 from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
 
 from lerobot_omnid.geometry import look_at
+from lerobot_omnid.keys import image_key
+from lerobot_omnid.measure.engine import Run
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 
 # Camera eyes around a table whose workspace is centred at (0.5, 0, 0) in the robot base frame.
@@ -169,3 +177,89 @@ def record_rig(root, rig: str, per_frame_calibration: bool, cameras, size: int =
     )
     assert summary.complete
     return root
+
+
+def record_five_cameras(root: Path, size: int) -> Path:
+    """Two select_apple expert episodes with all five cameras, recorded by ``omnid-record``'s own function
+    with its defaults (repo id, per-frame calibration)."""
+    from gym_omnid.constants import CAMERAS
+
+    from lerobot_omnid.record import record_dataset
+
+    summary = record_dataset(root, episodes=2, cameras=CAMERAS, image_size=size, seed=0, show_progress=False)
+    assert summary.complete and not summary.interrupted
+    return root
+
+
+def record_rigs_with_default_flags(parent: Path, rigs, camera: str, size: int) -> dict[str, Path]:
+    """One expert episode per rig, recorded by ``omnid-record`` (its ``main``) with no calibration flag, into
+    ``parent/<rig>`` with repo id ``local/<rig>``."""
+    from lerobot_omnid.record import main
+
+    roots = {}
+    for rig in rigs:
+        roots[rig] = parent / rig
+        argv = ["--episodes", "1", "--cameras", camera, "--image-size", str(size), "--rig", rig]
+        assert main([*argv, "--root", str(roots[rig]), "--repo-id", f"local/{rig}"]) == 0
+    return roots
+
+
+def load_recording(root: Path, repo_id: str = "local/omnid_select_apple"):
+    """The LeRobotDataset ``omnid-record`` wrote under ``root`` (default: its repo id for select_apple),
+    decoded with PyAV."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    return LeRobotDataset(repo_id, root=root, video_backend="pyav")
+
+
+def assert_only_dataset_dirs(root: Path) -> None:
+    """Nothing half-written: no staging images or temporary encoder folders left behind."""
+    assert sorted(p.name for p in root.iterdir()) == ["data", "meta", "videos"]
+
+
+CHECKPOINT_IMAGE_SIZE = 64  # px: the images of the checkpoints written by checkpoint_dir
+
+
+def checkpoint_config(policy_type: str, calibrations: dict) -> dict:
+    """The config.json content of a checkpoint of ``policy_type`` with cameras B-E at 64 px."""
+    size = CHECKPOINT_IMAGE_SIZE
+    features = {"observation.state": {"type": "STATE", "shape": [16]}}
+    features |= {image_key(c): {"type": "VISUAL", "shape": [3, size, size]} for c in TRAIN_CAMERAS}
+    config = {"type": policy_type, "input_features": features}
+    if policy_type == "omnid":
+        config |= {"camera_calibration": dict(calibrations), "volume_bounds": WORKSPACE_BOUNDS}
+    return config
+
+
+def checkpoint_dir(root: Path, policy_type: str, calibrations: dict) -> Path:
+    """A folder with the config.json and train_config.json of a checkpoint of ``policy_type``."""
+    root.mkdir(parents=True)
+    (root / "config.json").write_text(json.dumps(checkpoint_config(policy_type, calibrations)))
+    (root / "train_config.json").write_text(json.dumps({"seed": 1000}))
+    return root
+
+
+def flag(cmd, name: str) -> str | None:
+    """Value of ``--name=value`` in a command (None if absent)."""
+    values = [a.split("=", 1)[1] for a in cmd if a.startswith(f"--{name}=")]
+    assert len(values) <= 1, (name, values)
+    return values[0] if values else None
+
+
+def by_name(runs):
+    """A plan's runs by name."""
+    return {r.name: r for r in runs}
+
+
+WRITE_EVAL = (
+    "import json, pathlib, sys; p = pathlib.Path(sys.argv[1]); p.mkdir(parents=True, exist_ok=True); "
+    "(p / 'eval_info.json').write_text(json.dumps({'overall': {'pc_success': float(sys.argv[2]), "
+    "'n_episodes': 1}}))"
+)
+
+
+def evaluation(out: Path, name: str, rate: str = "0", needs=(), inputs=()) -> Run:
+    """An engine run whose tool is a tiny Python command writing an eval_info.json of success ``rate``."""
+    folder = out / name
+    cmd = (sys.executable, "-c", WRITE_EVAL, str(folder), rate)
+    return Run(name, "eval", cmd, folder, tuple(needs), inputs=tuple(inputs))

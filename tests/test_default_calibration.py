@@ -1,20 +1,16 @@
 """``omnid-record``'s default form of the calibration: every camera's in every frame, as dataset columns.
 
 Datasets of two rigs recorded with the default flags merge with LeRobot's own ``lerobot-edit-dataset``
-and keep each episode's own rig's calibration; ``--static-calibration`` opts out (not with the wrist
-camera); the env gives the columns by default, so an OmniD checkpoint trained on them evaluates without a
-flag, and a checkpoint with a static calibration acts exactly as without them; LeRobot's stock policies
-train and act on such a dataset; the benchmark, whose controls replace a static calibration, keeps
-recording the static form.
+and keep each episode's own rig's calibration (tests/e2e/test_default_calibration_merge.py);
+``--static-calibration`` opts out (not with the wrist camera); the env gives the columns by default, so an
+OmniD checkpoint trained on them evaluates without a flag, and a checkpoint with a static calibration acts
+exactly as without them; LeRobot's stock policies train and act on such a dataset; the benchmark, whose
+controls replace a static calibration, keeps recording the static form.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,19 +28,12 @@ from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
 from lerobot.policies.factory import make_policy, make_pre_post_processors
 from lerobot.policies.vqbet.configuration_vqbet import VQBeTConfig
 from lerobot.scripts.lerobot_eval import rollout
-from omnid_testing import tiny_config
+from omnid_testing import record_rigs_with_default_flags, tiny_config
 
 from lerobot_omnid.benchmark import demo, rigs_and_wrist
 from lerobot_omnid.benchmark.commands import record_command
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, build_plan
-from lerobot_omnid.calibration.frame_columns import (
-    extrinsics_column,
-    extrinsics_key,
-    intrinsics_column,
-    intrinsics_key,
-    is_calibration_key,
-)
-from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
+from lerobot_omnid.calibration.frame_columns import extrinsics_key, is_calibration_key
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 from lerobot_omnid.record import build_parser, main, record_dataset
@@ -53,62 +42,12 @@ SIZE = 32
 CAMERA = "cam_b"
 IMAGE_KEY = f"observation.images.{CAMERA}"
 RIGS = ("default", "closer")
-BIN = Path(sys.executable).parent
-
-
-def _rig_calibration(rig: str) -> dict:
-    """``cam_b``'s calibration in ``rig`` at ``SIZE``, as the env reports it."""
-    return OmniDEnvConfig(cameras=[CAMERA], image_size=SIZE, rig=rig).camera_calibrations()[IMAGE_KEY]
 
 
 @pytest.fixture(scope="module")
 def rig_roots(tmp_path_factory) -> dict[str, Path]:
     """One expert episode per rig, recorded by ``omnid-record`` with no calibration flag."""
-    roots = {}
-    for rig in RIGS:
-        roots[rig] = tmp_path_factory.mktemp("default_calibration") / rig
-        argv = ["--episodes", "1", "--cameras", CAMERA, "--image-size", str(SIZE), "--rig", rig]
-        assert main([*argv, "--root", str(roots[rig]), "--repo-id", f"local/{rig}"]) == 0
-    return roots
-
-
-def test_default_recordings_of_two_rigs_merge_and_keep_each_rigs_calibration(rig_roots, tmp_path):
-    """``lerobot-edit-dataset --operation.type merge`` (the console command, offline) on two datasets
-    recorded with the default flags; every frame of the merged dataset carries its own rig's calibration."""
-    merged = tmp_path / "merged"
-    cmd = [
-        str(BIN / "lerobot-edit-dataset"),
-        "--new_repo_id=local/merged",
-        f"--new_root={merged}",
-        "--operation.type=merge",
-        f"--operation.repo_ids={json.dumps([f'local/{rig}' for rig in RIGS])}",
-        f"--operation.roots={json.dumps([str(rig_roots[rig]) for rig in RIGS])}",
-    ]
-    env = {**os.environ, "HF_HUB_OFFLINE": "1"}
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-
-    dataset = LeRobotDataset("local/merged", root=merged, video_backend="pyav")
-    assert dataset.num_episodes == len(RIGS)
-    assert CALIBRATION_INFO_KEY not in dataset.meta.features[IMAGE_KEY]["info"]
-    frames = dataset.hf_dataset.with_format("numpy")
-    episodes = np.asarray(frames["episode_index"])
-    extrinsics = np.stack(frames[extrinsics_key(CAMERA)])
-    intrinsics = np.stack(frames[intrinsics_key(CAMERA)])
-    for episode, rig in enumerate(RIGS):  # merged in the order of --operation.roots
-        calib = _rig_calibration(rig)
-        rows = np.flatnonzero(episodes == episode)
-        assert len(rows) == LeRobotDatasetMetadata(f"local/{rig}", root=rig_roots[rig]).total_frames
-        expected_T, expected_K = extrinsics_column(calib["T_cam_world"]), intrinsics_column(calib["K"])
-        np.testing.assert_array_equal(extrinsics[rows], np.broadcast_to(expected_T, (len(rows), 16)))
-        np.testing.assert_array_equal(intrinsics[rows], np.broadcast_to(expected_K, (len(rows), 9)))
-        for row in rows[[0, -1]]:  # as a policy's data loader reads them
-            item = dataset[int(row)]
-            assert int(item["episode_index"]) == episode
-            np.testing.assert_array_equal(item[extrinsics_key(CAMERA)].numpy(), expected_T)
-            np.testing.assert_array_equal(item[intrinsics_key(CAMERA)].numpy(), expected_K)
-    first, second = (extrinsics_column(_rig_calibration(rig)["T_cam_world"]) for rig in RIGS)
-    assert not np.allclose(first, second, atol=1e-2)  # two rigs, two calibrations
+    return record_rigs_with_default_flags(tmp_path_factory.mktemp("default_calibration"), RIGS, CAMERA, SIZE)
 
 
 def test_per_frame_is_the_default_and_static_calibration_opts_out(tmp_path, capsys):
@@ -284,6 +223,7 @@ def test_benchmark_and_demo_record_the_static_form_and_rigs_and_wrist_per_frame(
         raise Planned(runs)
 
     monkeypatch.setattr(demo, "execute", stop)
+    monkeypatch.setattr(demo, "code_commit", lambda: "abc123")  # git runs in a subprocess
     with pytest.raises(Planned) as planned:
         demo.main(["--out", str(tmp_path / "demo")])
     (record,) = [run for run in planned.value.args[0] if run.kind == "record"]

@@ -1,15 +1,9 @@
 """``omnid-record``: datasets that load, carry calibration, names and task text, keep only successful
-episodes, are reproducible, survive Ctrl-C, and train and evaluate with the stock LeRobot CLIs."""
+episodes, are reproducible and survive an interrupt. (The console command's Ctrl-C and the stock LeRobot
+CLIs on a recording: tests/e2e/test_omnid_record.py.)"""
 
 from __future__ import annotations
 
-import json
-import os
-import re
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import gym_omnid.experts
@@ -17,12 +11,9 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 import pytest
-import torch
 from gym_omnid.constants import ACTION_NAMES, CAMERAS, STATE_NAMES
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
-from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
-from safetensors.torch import load_file
+from omnid_testing import assert_only_dataset_dirs, load_recording, record_five_cameras
 
 from lerobot_omnid.calibration.frame_columns import (
     extrinsics_column,
@@ -33,16 +24,11 @@ from lerobot_omnid.calibration.frame_columns import (
 )
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, calibration_from_feature_info
 from lerobot_omnid.env_config import OmniDEnvConfig
-from lerobot_omnid.record import EXIT_INTERRUPTED, main, record_dataset
+from lerobot_omnid.record import main, record_dataset
 
 SIZE = 64
-REPO_ID = "local/omnid_select_apple"
+REPO_ID = "local/omnid_select_apple"  # omnid-record's default for select_apple
 APPLE_INSTRUCTION = "put the apple in the bowl"
-BIN = Path(sys.executable).parent
-
-
-def _load(root: Path, repo_id: str = REPO_ID) -> LeRobotDataset:
-    return LeRobotDataset(repo_id, root=root, video_backend="pyav")
 
 
 def _read_data(root: Path, columns: list[str]) -> pd.DataFrame:
@@ -52,11 +38,6 @@ def _read_data(root: Path, columns: list[str]) -> pd.DataFrame:
 
 def _state_action(root: Path) -> pd.DataFrame:
     return _read_data(root, ["episode_index", "observation.state", "action"])
-
-
-def _assert_only_dataset_dirs(root: Path) -> None:
-    """Nothing half-written: no staging images or temporary encoder folders left behind."""
-    assert sorted(p.name for p in root.iterdir()) == ["data", "meta", "videos"]
 
 
 class _PatchedExperts:
@@ -108,14 +89,11 @@ def _expert_rollout_states(seed: int, episode_length: int = 200) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def five_cam_root(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("record") / "five_cams"
-    summary = record_dataset(root, episodes=2, cameras=CAMERAS, image_size=SIZE, seed=0, show_progress=False)
-    assert summary.complete and not summary.interrupted
-    return root
+    return record_five_cameras(tmp_path_factory.mktemp("record") / "five_cams", SIZE)
 
 
 def test_dataset_loads_with_calibrated_videos_names_and_task(five_cam_root):
-    ds = _load(five_cam_root)
+    ds = load_recording(five_cam_root)
     assert ds.num_episodes == 2
     assert ds.fps == 10
     assert ds.meta.robot_type == "omnid_sim_arm"
@@ -149,7 +127,7 @@ def test_dataset_loads_with_calibrated_videos_names_and_task(five_cam_root):
     # Every frame's task is the env's instruction.
     assert list(meta.tasks.index) == [APPLE_INSTRUCTION]
     assert set(_read_data(five_cam_root, ["task_index"])["task_index"]) == {0}
-    _assert_only_dataset_dirs(five_cam_root)
+    assert_only_dataset_dirs(five_cam_root)
 
 
 def test_failed_attempts_are_discarded_and_seeds_follow_attempts(monkeypatch, tmp_path):
@@ -172,8 +150,8 @@ def test_failed_attempts_are_discarded_and_seeds_follow_attempts(monkeypatch, tm
     # The one saved episode is attempt 2, i.e. seed 7 + 1, replayed here without the recorder.
     np.testing.assert_array_equal(np.stack(data["observation.state"]), _expert_rollout_states(8, 120))
     assert summary.frames == len(data) < 120
-    assert _load(tmp_path / "ds").num_episodes == 1
-    _assert_only_dataset_dirs(tmp_path / "ds")
+    assert load_recording(tmp_path / "ds").num_episodes == 1
+    assert_only_dataset_dirs(tmp_path / "ds")
 
 
 def test_same_seed_gives_same_data(tmp_path):
@@ -191,10 +169,10 @@ def test_interrupt_keeps_completed_episodes(monkeypatch, tmp_path):
         tmp_path / "ds", episodes=5, cameras=["cam_b", "cam_e"], image_size=SIZE, show_progress=False
     )
     assert summary.interrupted and (summary.episodes, summary.attempts) == (2, 3)
-    ds = _load(tmp_path / "ds")
+    ds = load_recording(tmp_path / "ds")
     assert ds.num_episodes == 2 and ds.num_frames == summary.frames
     assert ds[len(ds) - 1]["observation.images.cam_e"].shape == (3, SIZE, SIZE)
-    _assert_only_dataset_dirs(tmp_path / "ds")
+    assert_only_dataset_dirs(tmp_path / "ds")
 
 
 def test_nothing_left_when_no_episode_succeeds(monkeypatch, tmp_path):
@@ -239,7 +217,7 @@ def test_main_records_and_prints_summary(tmp_path, capsys):
     )
     out = capsys.readouterr().out
     assert "saved 1/1 episodes from 1 attempts" in out and "frames/s" in out and str(root) in out
-    assert _load(root, "me/apples").num_episodes == 1
+    assert load_recording(root, "me/apples").num_episodes == 1
 
 
 def test_static_calibration_flag_writes_the_feature_info(tmp_path):
@@ -256,7 +234,7 @@ def test_static_calibration_flag_writes_the_feature_info(tmp_path):
         assert calib.image_size == (SIZE, SIZE)
         assert calib.to_dict() == expected[key]
     assert not any(is_calibration_key(key) for key in meta.features)
-    assert _load(root, "me/static").num_episodes == 1
+    assert load_recording(root, "me/static").num_episodes == 1
 
 
 @pytest.mark.parametrize(
@@ -310,125 +288,3 @@ def test_record_dataset_rejects_bad_arguments(tmp_path):
     with pytest.raises(ValueError, match="`task`: expected one of"):
         record_dataset(tmp_path / "a", episodes=1, task="make_tea")
     assert not (tmp_path / "a").exists()
-
-
-def test_console_script_sigint_leaves_loadable_dataset(tmp_path):
-    root = tmp_path / "ds"
-    proc = subprocess.Popen(
-        [
-            str(BIN / "omnid-record"),
-            "--episodes",
-            "50",
-            "--cameras",
-            "cam_b",
-            "--image-size",
-            str(SIZE),
-            "--root",
-            str(root),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    first_video = root / "videos" / "observation.images.cam_b" / "chunk-000" / "file-000.mp4"
-    deadline = time.monotonic() + 120
-    while not first_video.exists() and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert proc.poll() is None, proc.communicate()
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=120)
-    assert proc.returncode == EXIT_INTERRUPTED, err
-    assert "Interrupted: saved" in out
-    assert "Traceback" not in err
-    ds = _load(root)
-    assert 1 <= ds.num_episodes < 50
-    assert ds[len(ds) - 1]["observation.images.cam_b"].shape == (3, SIZE, SIZE)
-    _assert_only_dataset_dirs(root)
-
-
-# Without FFmpeg's shared libraries, torchcodec's import fails and LeRobot logs the loading tracebacks
-# between these markers before falling back to PyAV; any other traceback is a real error.
-TORCHCODEC_LOADING_TRACEBACK = re.compile(
-    r"\[start of libtorchcodec loading traceback\].*?\[end of libtorchcodec loading traceback\]", re.DOTALL
-)
-
-
-def _run_cli(args: list[str]) -> subprocess.CompletedProcess:
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    proc = subprocess.run(args, capture_output=True, text=True, timeout=600, env=env)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-5000:]
-    assert "Traceback" not in TORCHCODEC_LOADING_TRACEBACK.sub("", proc.stderr), proc.stderr[-5000:]
-    return proc
-
-
-@pytest.fixture(scope="module")
-def diffusion_checkpoint(five_cam_root, tmp_path_factory) -> Path:
-    """A stock Diffusion Policy trained for 2 steps on the recorded five-camera dataset."""
-    out = tmp_path_factory.mktemp("train") / "diffusion"
-    _run_cli(
-        [
-            str(BIN / "lerobot-train"),
-            f"--dataset.repo_id={REPO_ID}",
-            f"--dataset.root={five_cam_root}",
-            "--dataset.video_backend=pyav",
-            "--policy.type=diffusion",
-            "--policy.device=cpu",
-            "--policy.push_to_hub=false",
-            "--policy.pretrained_backbone_weights=null",
-            "--policy.crop_shape=null",
-            "--policy.use_separate_rgb_encoder_per_camera=false",
-            "--policy.down_dims=[32,64]",
-            "--policy.num_inference_steps=5",
-            "--steps=2",
-            "--batch_size=2",
-            "--num_workers=0",
-            f"--output_dir={out}",
-            "--wandb.enable=false",
-        ]
-    )
-    checkpoint = out / "checkpoints" / "last" / "pretrained_model"
-    assert (checkpoint / "model.safetensors").exists()
-    return checkpoint
-
-
-def test_stock_diffusion_trains_on_recorded_dataset(diffusion_checkpoint):
-    """LeRobot makes the default per-frame calibration columns STATE inputs of a stock policy; constant
-    over one rig's dataset (min == max), their normalisation stays finite, and DP reads only
-    ``observation.state`` and the images (its conditioning does not grow with them)."""
-    config = json.loads((diffusion_checkpoint / "config.json").read_text())
-    key = extrinsics_key("cam_a")
-    assert config["input_features"][key] == {"type": "STATE", "shape": [16]}
-    stats = load_file(
-        next(diffusion_checkpoint.glob("policy_preprocessor_step_*_normalizer_processor.safetensors"))
-    )
-    assert torch.equal(stats[f"{key}.min"], stats[f"{key}.max"])  # constant columns
-    policy = DiffusionPolicy.from_pretrained(diffusion_checkpoint)
-    per_step = len(STATE_NAMES) + len(CAMERAS) * policy.diffusion.rgb_encoder.feature_dim
-    cond_dim = policy.config.diffusion_step_embed_dim + per_step * policy.config.n_obs_steps
-    assert policy.diffusion.unet.down_modules[0][0].cond_encoder[1].in_features == cond_dim
-    assert all(torch.isfinite(p).all() for p in policy.parameters())  # trained without NaN
-
-
-def test_stock_lerobot_eval_runs_omnid_env_and_writes_video(diffusion_checkpoint, tmp_path):
-    """The env's default observation carries the per-frame calibration the checkpoint was trained with."""
-    out = tmp_path / "eval"
-    _run_cli(
-        [
-            str(BIN / "lerobot-eval"),
-            "--env.type=omnid",
-            "--env.task=select_apple",
-            "--env.layout=position_ood",
-            f"--env.cameras=[{','.join(CAMERAS)}]",
-            f"--env.image_size={SIZE}",
-            "--env.episode_length=10",
-            f"--policy.path={diffusion_checkpoint}",
-            "--eval.n_episodes=1",
-            "--eval.batch_size=1",
-            "--policy.device=cpu",
-            f"--output_dir={out}",
-        ]
-    )
-    videos = list((out / "videos").rglob("*.mp4"))
-    assert len(videos) == 1 and videos[0].stat().st_size > 0
-    overall = json.loads((out / "eval_info.json").read_text())["overall"]
-    assert overall["n_episodes"] == 1 and 0 <= overall["pc_success"] <= 100

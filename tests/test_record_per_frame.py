@@ -1,11 +1,11 @@
 """``omnid-record --per-frame-calibration`` (now the default, the flag still accepted): every camera's
 calibration in every frame as dataset columns equal to the env's, a feature schema that is the same for
 every rig, so that datasets of two rigs merge with LeRobot's own ``lerobot-edit-dataset``, which refuses
-the same datasets recorded with ``--static-calibration``."""
+the same datasets recorded with ``--static-calibration``. (The console commands and a training run on the
+merge: tests/e2e/test_per_frame_merge_train.py.)"""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -17,8 +17,7 @@ import pytest
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.scripts.lerobot_edit_dataset import edit_dataset
-from omnid_jobs import Job, job
-from omnid_testing import TINY_POLICY_FLAGS, record_rig
+from omnid_testing import record_rig
 
 from lerobot_omnid.calibration.frame_columns import (
     EXTRINSICS_NAMES,
@@ -31,7 +30,6 @@ from lerobot_omnid.calibration.frame_columns import (
 )
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
 from lerobot_omnid.env_config import OmniDEnvConfig
-from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 from lerobot_omnid.record import record_dataset
 
 SIZE = 32
@@ -150,64 +148,3 @@ def test_datasets_of_two_rigs_merge_with_the_columns_and_not_without(tmp_path, m
     static = [_record(tmp_path / f"{rig}_static", rig, False, cams) for rig in ("default", "bumped")]
     with pytest.raises(ValueError, match="Same features is expected"):
         _merge(static, tmp_path / "merged_static", monkeypatch)
-
-
-@job("record_two_rigs_merge_train", seconds=40)
-def _record_two_rigs_merge_train(job: Job) -> dict:
-    """The console commands of the test below; lerobot-train once the merge succeeded."""
-    tmp_path = job.tmp
-    bin_dir = Path(sys.executable).parent
-    roots = [tmp_path / rig for rig in ("closer", "higher")]
-    for root in roots:
-        record = [str(bin_dir / "omnid-record"), "--episodes", "1", "--cameras", "cam_c,cam_wrist"]
-        record += ["--image-size", str(SIZE), "--rig", root.name, "--per-frame-calibration"]
-        record += ["--root", str(root), "--repo-id", f"local/{root.name}"]
-        job.run(record, check=True, timeout=600, text=False)
-    merge = [
-        str(bin_dir / "lerobot-edit-dataset"),
-        "--new_repo_id=local/merged",
-        f"--new_root={tmp_path / 'm'}",
-    ]
-    merge += ["--operation.type=merge", f"--operation.repo_ids={[f'local/{r.name}' for r in roots]}"]
-    merge += [f"--operation.roots={[str(r) for r in roots]}"]
-    ran = {"merge": job.run(merge, timeout=600)}
-    if ran["merge"].returncode == 0:
-        train = [
-            str(bin_dir / "lerobot-train"),
-            "--dataset.repo_id=local/merged",
-            f"--dataset.root={tmp_path / 'm'}",
-        ]
-        train += ["--dataset.video_backend=pyav", *TINY_POLICY_FLAGS, "--steps=2", "--batch_size=2"]
-        train += ["--num_workers=0", "--save_freq=2", f"--output_dir={tmp_path / 'train'}"]
-        train += ["--wandb.enable=false"]
-        ran["train"] = job.run(train, timeout=600)
-    return {"tmp_path": tmp_path, **ran}
-
-
-@pytest.mark.slow
-@pytest.mark.jobs("record_two_rigs_merge_train")
-def test_console_commands_record_two_rigs_and_merge(jobs):
-    """The same with the console commands a user types: ``omnid-record --rig ... --per-frame-calibration``
-    twice, then ``lerobot-edit-dataset --operation.type merge``."""
-    ran = jobs.result("record_two_rigs_merge_train")
-    tmp_path = ran["tmp_path"]
-    proc = ran["merge"]
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    merged = LeRobotDataset("local/merged", root=tmp_path / "m", video_backend="pyav")
-    assert merged.num_episodes == 2
-    first, last = merged[0], merged[len(merged) - 1]
-    assert not np.array_equal(first[extrinsics_key("cam_c")], last[extrinsics_key("cam_c")])
-
-    # One OmniD model learns from both rigs: lerobot-train reads every frame's calibration from the columns.
-    out = tmp_path / "train"
-    proc = ran["train"]
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    checkpoint = out / "checkpoints" / "last" / "pretrained_model"
-    config = json.loads((checkpoint / "config.json").read_text())
-    keys = ["observation.images.cam_c", "observation.images.cam_wrist"]
-    assert config["frame_calibration"] == keys and config["camera_calibration"] == {}
-    assert sorted(config["input_features"]) == [*keys, "observation.state"]  # the columns are not state
-    policy = OmniDPolicy.from_pretrained(checkpoint).eval()
-    obs = {k: v[None] for k, v in last.items() if k.startswith("observation.") and k != "observation.state"}
-    obs["observation.state"] = last["observation.state"][None]
-    assert policy.select_action(obs).shape == (1, last["action"].shape[0])

@@ -2,7 +2,7 @@
 
 This is the only place where image features are gathered at learned locations. It is pure PyTorch
 (``grid_sample``), so it runs on CPU and GPU. A faster kernel may replace it and must match it
-(``tests/test_deformable_sampling.py``).
+(``tests/policy/test_deformable_sampling.py``).
 
 Memory: the naive formulation materialises B*S*heads*Q*N*Dh sampled values (B batch, S cameras,
 Q queries, N samples per query, Dh channels per head) before the weighted sum. We process queries in

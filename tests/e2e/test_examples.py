@@ -8,15 +8,15 @@ import sys
 from pathlib import Path
 
 import pytest
-from omnid_jobs import Job, job
 
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
-FAKE_HUB = Path(__file__).parent / "fake_hub"
+FAKE_HUB = Path(__file__).parents[1] / "fake_hub"
 
-pytestmark = pytest.mark.slow
+# Steps 4-8 start from the datasets and checkpoint of steps 1-3 (a module fixture): one worker.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("examples")]
 
 TINY_POLICY = (
     "--policy.d_model=32", "--policy.num_heads=2", "--policy.num_layers=1", "--policy.ffn_dim=64",
@@ -37,8 +37,10 @@ def workflow_env(out: Path) -> dict:
     return env
 
 
-def run_example(job: Job, name: str, env: dict) -> subprocess.CompletedProcess:
-    return job.run(["bash", str(EXAMPLES / name)], env=env, timeout=900)
+def run_example(name: str, env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        ["bash", str(EXAMPLES / name)], capture_output=True, text=True, env=env, timeout=900
+    )
 
 
 def example_log(results: dict[str, subprocess.CompletedProcess], name: str) -> str:
@@ -47,33 +49,23 @@ def example_log(results: dict[str, subprocess.CompletedProcess], name: str) -> s
     return result.stdout + result.stderr
 
 
-# The scripts run as background jobs (tests/omnid_jobs.py): steps 1-3 in order (stopping at the first that
-# fails), then the steps that start from their datasets and checkpoint, each a job of its own.
-@job("examples", seconds=300)  # with the jobs that wait for it
-def _record_train_evaluate(job: Job) -> tuple[Path, dict, dict[str, subprocess.CompletedProcess]]:
-    out = job.tmp
+@pytest.fixture(scope="module")
+def examples(tmp_path_factory) -> tuple[Path, dict, dict[str, subprocess.CompletedProcess]]:
+    """Steps 1-3 in order, stopping at the first that fails; the steps after them start from their outputs."""
+    out = tmp_path_factory.mktemp("examples")
     env = workflow_env(out)
     results = {}
     for name in ("01_record_datasets.sh", "02_train_omnid.sh", "03_evaluate.sh"):
-        results[name] = run_example(job, name, env)
+        results[name] = run_example(name, env)
         if results[name].returncode != 0:
             break
     return out, env, results
 
 
-def _after_step_3(name: str, seconds: float):
-    """A job running example ``name`` on the outputs of steps 1-3."""
-
-    def run(job: Job) -> dict[str, subprocess.CompletedProcess]:
-        _, env, _ = job.result("examples")
-        return {name: run_example(job, name, env)}
-
-    return job(name, seconds)(run)
-
-
-_after_step_3("04_finetune_camera_a.sh", 60)
-_after_step_3("05_eval_camera_subset.sh", 15)
-_after_step_3("07_accelerate_two_processes.sh", 30)
+def after_step_3(examples, name: str) -> dict[str, subprocess.CompletedProcess]:
+    """Example ``name`` run on the outputs of steps 1-3."""
+    _, env, _ = examples
+    return {name: run_example(name, env)}
 
 
 def success_info(eval_dir: Path) -> dict:
@@ -82,9 +74,8 @@ def success_info(eval_dir: Path) -> dict:
     return info
 
 
-@pytest.mark.jobs("examples")
-def test_record_train_evaluate(jobs):
-    out, _, ran = jobs.result("examples")
+def test_record_train_evaluate(examples):
+    out, _, ran = examples
     example_log(ran, "01_record_datasets.sh")
     for name in ("select_apple_bcde", "select_apple_a", "select_chemistry_tube_a"):
         assert (out / "data" / name / "meta" / "info.json").is_file()
@@ -99,20 +90,19 @@ def test_record_train_evaluate(jobs):
         success_info(out / f"eval_bcde_{setting}")
 
 
-@job("08_run_checkpoint.py", seconds=15)
-def _run_checkpoint(job: Job) -> tuple[Path, subprocess.CompletedProcess]:
-    out, env, _ = job.result("examples")
+@pytest.fixture
+def run_checkpoint(examples) -> tuple[Path, subprocess.CompletedProcess]:
+    out, env, _ = examples
     checkpoint = out / "train_bcde" / "checkpoints" / "last" / "pretrained_model"
-    return checkpoint, job.run(
+    return checkpoint, subprocess.run(
         [sys.executable, str(EXAMPLES / "08_run_checkpoint.py"), f"--checkpoint={checkpoint}",
          "--task=select_apple", "--seed=1", "--device=cpu", "--max-steps=3"],
-        env=env, timeout=300,
+        capture_output=True, text=True, env=env, timeout=300,
     )  # fmt: skip
 
 
-@pytest.mark.jobs("08_run_checkpoint.py")
-def test_python_example_runs_the_checkpoint_for_one_episode(jobs):
-    checkpoint, result = jobs.result("08_run_checkpoint.py")
+def test_python_example_runs_the_checkpoint_for_one_episode(run_checkpoint):
+    checkpoint, result = run_checkpoint
     assert checkpoint.is_dir(), "trained by 02_train_omnid.sh (test_record_train_evaluate)"
     assert result.returncode == 0, f"{result.stdout[-2000:]}\n{result.stderr[-4000:]}"
     lines = result.stdout.splitlines()
@@ -121,10 +111,9 @@ def test_python_example_runs_the_checkpoint_for_one_episode(jobs):
     assert re.fullmatch(r"select_apple, seed 1: (success after [1-3]|failure after 3) steps", lines[-1])
 
 
-@pytest.mark.jobs("examples", "04_finetune_camera_a.sh")
-def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(jobs):
-    out, _, _ = jobs.result("examples")
-    example_log(jobs.result("04_finetune_camera_a.sh"), "04_finetune_camera_a.sh")
+def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(examples):
+    out, _, _ = examples
+    example_log(after_step_3(examples, "04_finetune_camera_a.sh"), "04_finetune_camera_a.sh")
     base = OmniDPolicy.from_pretrained(out / "train_bcde" / "checkpoints" / "last" / "pretrained_model")
     for task in ("select_apple", "select_chemistry_tube"):
         tuned = OmniDPolicy.from_pretrained(
@@ -152,36 +141,34 @@ def test_finetune_on_camera_a_keeps_weights_and_takes_new_calibration(jobs):
         success_info(out / f"eval_finetune_a_{task}")
 
 
-@pytest.mark.jobs("examples", "05_eval_camera_subset.sh")
-def test_evaluate_on_a_camera_subset(jobs):
-    out, _, _ = jobs.result("examples")
-    example_log(jobs.result("05_eval_camera_subset.sh"), "05_eval_camera_subset.sh")
+def test_evaluate_on_a_camera_subset(examples):
+    out, _, _ = examples
+    example_log(after_step_3(examples, "05_eval_camera_subset.sh"), "05_eval_camera_subset.sh")
     success_info(out / "eval_bcde_on_bc")
 
 
-@job("06_push_to_hub.sh", seconds=40)
-def _push_and_evaluate(job: Job) -> tuple[Path, dict[str, subprocess.CompletedProcess]]:
+@pytest.fixture
+def push_and_evaluate(examples, tmp_path) -> tuple[Path, dict[str, subprocess.CompletedProcess]]:
     """06_push_to_hub.sh into a fake Hub, then lerobot-eval of the pushed folder in a fresh process."""
-    _, env, _ = job.result("examples")
-    hub = job.tmp / "hub"
+    _, env, _ = examples
+    hub = tmp_path / "hub"
     env = dict(env, HUB_REPO_ID="someone/omnid_select_apple", OMNID_FAKE_HUB_DIR=str(hub),
                PYTHONPATH=f"{FAKE_HUB}{os.pathsep}{env.get('PYTHONPATH', '')}")  # fmt: skip
-    ran = {"06_push_to_hub.sh": run_example(job, "06_push_to_hub.sh", env)}
+    ran = {"06_push_to_hub.sh": run_example("06_push_to_hub.sh", env)}
     if ran["06_push_to_hub.sh"].returncode == 0:
         pushed = hub / "someone" / "omnid_select_apple"
-        ran["lerobot-eval"] = job.run(
+        ran["lerobot-eval"] = subprocess.run(
             [str(Path(sys.executable).parent / "lerobot-eval"), f"--policy.path={pushed}",
              "--policy.device=cpu", "--env.type=omnid", "--env.task=select_apple",
              "--env.cameras=[cam_b,cam_c,cam_d,cam_e]", "--env.image_size=64", "--env.episode_length=10",
-             "--eval.n_episodes=1", "--eval.batch_size=1", f"--output_dir={job.tmp / 'eval_pushed'}"],
-            timeout=600,
+             "--eval.n_episodes=1", "--eval.batch_size=1", f"--output_dir={tmp_path / 'eval_pushed'}"],
+            capture_output=True, text=True, timeout=600,
         )  # fmt: skip
-    return job.tmp, ran
+    return tmp_path, ran
 
 
-@pytest.mark.jobs("06_push_to_hub.sh")
-def test_push_to_hub_folder_card_and_reload_in_fresh_process(jobs):
-    tmp_path, ran = jobs.result("06_push_to_hub.sh")
+def test_push_to_hub_folder_card_and_reload_in_fresh_process(push_and_evaluate):
+    tmp_path, ran = push_and_evaluate
     hub = tmp_path / "hub"
     example_log(ran, "06_push_to_hub.sh")
     pushed = hub / "someone" / "omnid_select_apple"
@@ -202,10 +189,11 @@ def test_push_to_hub_folder_card_and_reload_in_fresh_process(jobs):
     success_info(tmp_path / "eval_pushed")
 
 
-@pytest.mark.jobs("examples", "07_accelerate_two_processes.sh")
-def test_accelerate_two_processes(jobs):
-    out, _, _ = jobs.result("examples")
-    log = example_log(jobs.result("07_accelerate_two_processes.sh"), "07_accelerate_two_processes.sh")
+def test_accelerate_two_processes(examples):
+    out, _, _ = examples
+    log = example_log(
+        after_step_3(examples, "07_accelerate_two_processes.sh"), "07_accelerate_two_processes.sh"
+    )
     assert "Effective batch size: 2 x 2 = 4" in log
     assert (
         out / "train_bcde_2proc" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors"

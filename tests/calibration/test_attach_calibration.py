@@ -1,24 +1,21 @@
-"""Calibration files (JSON/YAML, T_world_cam, distortion) and ``omnid-attach-calibration``: a dataset
-recorded without calibration gets one, is loadable by LeRobot and accepted by OmniD, keeps its data and
-videos byte for byte, and a bad file leaves it untouched with an error naming camera and field."""
+"""Calibration files (JSON/YAML, T_world_cam, distortion) and ``omnid-attach-calibration``: a bad file leaves
+the dataset untouched with an error naming camera and field; distortion modes, re-attaching, skipped
+cameras, volume bounds, the Hub. (The console command on an uncalibrated dataset, which then loads in
+LeRobot and OmniD with its data and videos unchanged: tests/e2e/test_omnid_attach_calibration.py.)"""
 
 from __future__ import annotations
 
 import copy
-import hashlib
 import json
 import re
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from gym_omnid.calibration import mujoco_camera_calibration
-from gym_omnid.constants import CAMERA_FOVY
-from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
-from omnid_testing import ACTION_DIM, STATE_DIM, tiny_config
+from calibration_testing import CAMS, REPO_ID, SIZE, digests, make_uncalibrated_dataset, sim_calibration
+from gym_omnid.scene import CAMERA_POSES
+from omnid_testing import tiny_config
 
 import lerobot_omnid.calibration.rig_file as calibration_file
 from lerobot_omnid.calibration.attach_calibration import main
@@ -27,54 +24,7 @@ from lerobot_omnid.calibration.rig_file import (
     load_calibration_meta,
     save_calibration_file,
 )
-from lerobot_omnid.calibration.schema import (
-    CalibrationError,
-    CameraCalibration,
-    calibration_from_feature_info,
-)
-
-REPO_ID = "local/uncalibrated"
-CAMS = ("cam_b", "cam_c")
-SIZE = (36, 48)  # (height, width) in the dataset: 4:3 like 640x480, not square (swapped sizes are caught)
-BIN = Path(sys.executable).parent
-
-
-def sim_calibration(cam: str, size: tuple[int, int] = SIZE) -> dict:
-    """JSON-ready calibration of one benchmark camera (the env's placement and field of view)."""
-    position, target = CAMERA_POSES[cam]
-    xyaxes = look_at_xyaxes(position, target)
-    world_R_mjcam = np.stack([xyaxes[:3], xyaxes[3:], np.cross(xyaxes[:3], xyaxes[3:])], axis=1)
-    calib = mujoco_camera_calibration(CAMERA_FOVY, np.array(position), world_R_mjcam, size)
-    return {"K": calib["K"].tolist(), "T_cam_world": calib["T_cam_world"].tolist(), "image_size": list(size)}
-
-
-def make_uncalibrated_dataset(root: Path) -> None:
-    """A LeRobotDataset as LeRobot's own recorder writes it: video cameras without calibration."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    height, width = SIZE
-    features = {
-        "observation.state": {"dtype": "float32", "shape": (STATE_DIM,), "names": None},
-        "action": {"dtype": "float32", "shape": (ACTION_DIM,), "names": None},
-        **{
-            f"observation.images.{cam}": {
-                "dtype": "video",
-                "shape": (height, width, 3),
-                "names": ["height", "width", "channels"],
-            }
-            for cam in CAMS
-        },
-    }
-    dataset = LeRobotDataset.create(REPO_ID, fps=10, features=features, root=root, use_videos=True)
-    rng = np.random.default_rng(0)
-    for _ in range(4):
-        frame = {f"observation.images.{c}": rng.integers(0, 256, (height, width, 3), np.uint8) for c in CAMS}
-        frame["observation.state"] = rng.standard_normal(STATE_DIM).astype(np.float32)
-        frame["action"] = rng.standard_normal(ACTION_DIM).astype(np.float32)
-        frame["task"] = "pick the cube"
-        dataset.add_frame(frame)
-    dataset.save_episode()
-    dataset.finalize()
+from lerobot_omnid.calibration.schema import CalibrationError, CameraCalibration
 
 
 @pytest.fixture(scope="module")
@@ -89,14 +39,6 @@ def dataset(pristine, tmp_path) -> Path:
     root = tmp_path / "dataset"
     shutil.copytree(pristine, root)
     return root
-
-
-def digests(root: Path) -> dict[str, str]:
-    return {
-        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(root.rglob("*"))
-        if p.is_file()
-    }
 
 
 def write(path: Path, data: dict) -> Path:
@@ -184,60 +126,6 @@ def test_unreadable_files(tmp_path):
 
 
 # --- attaching ---------------------------------------------------------------------------------------
-
-
-def test_attach_to_uncalibrated_dataset(dataset, tmp_path):
-    """The console script attaches a 2x-resolution calibration (K rescaled; one camera given by its
-    pose T_world_cam); LeRobot loads the dataset, OmniD takes the calibration, nothing else changed."""
-    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    before = digests(dataset)
-    original_info = (dataset / "meta" / "info.json").read_bytes()
-    original_mode = (dataset / "meta" / "info.json").stat().st_mode
-    high_res = (SIZE[0] * 2, SIZE[1] * 2)
-    cam_c = sim_calibration("cam_c", high_res)
-    cam_c["T_world_cam"] = np.linalg.inv(np.array(cam_c.pop("T_cam_world"))).tolist()
-    rig = tmp_path / "rig.yaml"
-    rig.write_text(json.dumps({"cam_b": sim_calibration("cam_b", high_res), "cam_c": cam_c}))  # JSON is YAML
-
-    result = subprocess.run(
-        [BIN / "omnid-attach-calibration", "--root", dataset, "--calibration", rig],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert result.returncode == 0, result.stderr
-    assert "K rescaled from 96x72 to 48x36 px" in result.stdout
-    assert "attached the calibration of 2 camera(s)" in result.stdout
-
-    after = digests(dataset)
-    changed = {k for k in after if before.get(k) != after[k]}
-    assert changed == {"meta/info.json", "meta/info.json.bak"}, "only the metadata may change"
-    assert (dataset / "meta" / "info.json.bak").read_bytes() == original_info
-    assert (dataset / "meta" / "info.json").stat().st_mode == original_mode
-
-    meta = LeRobotDatasetMetadata(REPO_ID, root=dataset)
-    for cam in CAMS:
-        key = f"observation.images.{cam}"
-        calib = calibration_from_feature_info(key, meta.features[key])
-        expected = sim_calibration(cam)
-        assert calib.image_size == SIZE
-        np.testing.assert_allclose(calib.K, expected["K"], atol=1e-9)
-        np.testing.assert_allclose(calib.T_cam_world, expected["T_cam_world"], atol=1e-9)
-        assert meta.features[key]["info"]["video.height"] == SIZE[0]  # LeRobot's own entries kept
-        assert meta.features[key]["info"]["calibration_source"]["file"] == "rig.yaml"
-
-    item = LeRobotDataset(REPO_ID, root=dataset, video_backend="pyav")[0]
-    assert item["observation.images.cam_b"].shape == (3, *SIZE)
-
-    config = tiny_config(cams=CAMS, size=SIZE[0])
-    config.set_dataset_feature_metadata(meta.features)
-    config.validate_features()
-    assert sorted(config.camera_calibration) == [f"observation.images.{c}" for c in CAMS]
-    np.testing.assert_allclose(
-        config.camera_calibration["observation.images.cam_c"]["K"], sim_calibration("cam_c")["K"], atol=1e-9
-    )
 
 
 def _inverted(cam: str) -> dict:

@@ -11,7 +11,6 @@ point 1.3 px, centre 3.5 mm, rotation 0.18 deg.
 from __future__ import annotations
 
 import json
-import math
 import re
 import shutil
 from pathlib import Path
@@ -20,11 +19,21 @@ import cv2
 import mujoco
 import numpy as np
 import pytest
+from calibration_testing import (
+    CAMS,
+    CHARUCO,
+    CHECKERBOARD,
+    PX_PER_SQUARE,
+    REPO_ID,
+    SIZE,
+    board_args,
+    make_uncalibrated_dataset,
+    pose_errors,
+)
 from gym_omnid.calibration import invert_rigid, mujoco_camera_calibration
 from gym_omnid.constants import CAMERA_FOVY, CAMERAS
 from gym_omnid.env import OmniDEnv
 from gym_omnid.scene import CAMERA_POSES, look_at_xyaxes
-from test_attach_calibration import CAMS, REPO_ID, SIZE, make_uncalibrated_dataset
 
 from lerobot_omnid.calibration.attach_calibration import main as attach_main
 from lerobot_omnid.calibration.board import BoardSpec, board_image, detect_board
@@ -34,29 +43,12 @@ from lerobot_omnid.calibration.schema import CalibrationError
 from lerobot_omnid.calibration.solve import load_board_pose, world_T_board_from_points, world_T_board_on_table
 
 HEIGHT, WIDTH = 480, 640
-PX_PER_SQUARE = 64  # texture pixels per board square
 INTRINSICS_VIEWS = 10
 BOARD_ON_TABLE = (0.42, 0.12, 20.0)  # x, y (m), yaw (deg) of the board lying on the table for extrinsics
-CHECKERBOARD = BoardSpec("checkerboard", 9, 6, 0.03)  # 30 x 21 cm
-CHARUCO = BoardSpec("charuco", 7, 5, 0.06, 0.045, "DICT_4X4_50")  # 42 x 30 cm, readable at 1 m
 FOCAL_REL_TOL = 0.01
 PRINCIPAL_TOL_PX = 2.0
 POSITION_TOL_M = 0.01
 ROTATION_TOL_DEG = 0.5
-
-
-def board_args(board: BoardSpec) -> list[str]:
-    args = [
-        "--board",
-        board.kind,
-        "--pattern",
-        f"{board.cols}x{board.rows}",
-        "--square-size",
-        str(board.square_size),
-    ]
-    if board.kind == "charuco":
-        args += ["--marker-size", str(board.marker_size), "--dictionary", board.dictionary]
-    return args
 
 
 class BoardScene:
@@ -207,14 +199,6 @@ def calibrate_args(board: BoardSpec, cam: str, images: tuple[str, str], output: 
         "--output",
         str(output),
     ]
-
-
-def pose_errors(cam_T_world: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
-    """(distance between the camera centres in metres, rotation angle between them in degrees)."""
-    centre, centre_truth = invert_rigid(cam_T_world)[:3, 3], invert_rigid(truth)[:3, 3]
-    delta = cam_T_world[:3, :3] @ truth[:3, :3].T
-    angle = math.degrees(math.acos(np.clip((np.trace(delta) - 1) / 2, -1.0, 1.0)))
-    return float(np.linalg.norm(centre - centre_truth)), angle
 
 
 @pytest.mark.parametrize("board", [CHECKERBOARD, CHARUCO], ids=["checkerboard", "charuco"])
@@ -398,7 +382,7 @@ def test_readme_walkthrough_commands_parse():
     from lerobot_omnid.calibration import attach_calibration
     from lerobot_omnid.calibration import calibrate as calibrate_cameras
 
-    doc = (Path(__file__).parents[1] / "docs" / "calibration.md").read_text()
+    doc = (Path(__file__).parents[2] / "docs" / "calibration.md").read_text()
     section = doc.split("## Bring your own robot")[1].split("\n## ")[0]
     parsers = {
         "omnid-calibrate": calibrate_cameras.build_parser,

@@ -17,13 +17,13 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_robustness import checkpoint_dir
+from omnid_testing import checkpoint_dir
 
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import demo, readout_selection, rigs_and_wrist, robustness
 from lerobot_omnid.env_config import OmniDEnvConfig
 
-BEFORE = json.loads((Path(__file__).parent / "fixtures" / "planned_commands_2dae655.json").read_text())
+BEFORE = json.loads((Path(__file__).parents[1] / "fixtures" / "planned_commands_2dae655.json").read_text())
 TINY = "--episodes 1 --steps 2 --batch-size 2 --image-size 64 --num-workers 0 --eval-episodes 1"
 TINY += " --episode-length 10"
 BENCHMARK = {
@@ -64,7 +64,8 @@ def with_static_recordings(commands: list[list[str]]) -> list[list[str]]:
 
 
 @pytest.mark.parametrize("variant", sorted(BENCHMARK))
-def test_benchmark_plans_the_same_commands(variant, tmp_path):
+def test_benchmark_plans_the_same_commands(variant, tmp_path, monkeypatch):
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")  # git runs in a subprocess
     out = tmp_path / "out"
     assert planned(bench.main, ["--out", str(out), *BENCHMARK[variant]], tmp_path, out) == (
         with_static_recordings(BEFORE[variant])

@@ -16,7 +16,7 @@ from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.modeling_omnid import FRAME_MATRICES, OmniDPolicy
 from lerobot_omnid.policy.omni_feature_generator import camera_geometry
 
-FIXTURE = Path(__file__).parent / "fixtures" / "checkpoint_v0_1"
+FIXTURE = Path(__file__).parents[1] / "fixtures" / "checkpoint_v0_1"
 SIZE = 32
 CAMS = ("cam_b", "cam_c")
 

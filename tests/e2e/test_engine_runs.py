@@ -3,24 +3,11 @@
 import json
 import shutil
 import sys
-from pathlib import Path
 
 import pytest
+from omnid_testing import evaluation
 
-from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import Run, execute, is_done, plan, state
-
-WRITE_EVAL = (
-    "import json, pathlib, sys; p = pathlib.Path(sys.argv[1]); p.mkdir(parents=True, exist_ok=True); "
-    "(p / 'eval_info.json').write_text(json.dumps({'overall': {'pc_success': float(sys.argv[2]), "
-    "'n_episodes': 1}}))"
-)
-
-
-def evaluation(out: Path, name: str, rate: str = "0", needs=(), inputs=()) -> Run:
-    folder = out / name
-    cmd = (sys.executable, "-c", WRITE_EVAL, str(folder), rate)
-    return Run(name, "eval", cmd, folder, tuple(needs), inputs=tuple(inputs))
 
 
 def test_runs_once_then_reuses_and_reruns_what_changed(tmp_path):
@@ -73,14 +60,3 @@ def test_a_failure_blocks_what_needs_it_or_stops_naming_its_log(tmp_path, capsys
     assert "b: skipped, it needs a" in capsys.readouterr().out
     with pytest.raises(SystemExit, match=r"a: FAILED \(exit code 3, output incomplete\); log: .*a\.log"):
         execute(runs, out, stop_on_failure=True)
-
-
-def test_a_plan_is_checked(tmp_path):
-    with pytest.raises(ValueError, match="two runs are named 'a'"):
-        plan([evaluation(tmp_path, "a"), evaluation(tmp_path, "a")], tmp_path)
-    with pytest.raises(ValueError, match=r"b needs \['a'\], which are not planned before it"):
-        plan([evaluation(tmp_path, "b", needs=["a"])], tmp_path)
-    with pytest.raises(ValueError, match="kind 'bake' is not one of"):
-        plan([Run("a", "bake", ("true",), tmp_path)], tmp_path)
-    with pytest.raises(RuntimeError, match="not planned"):
-        engine.write_stamp(evaluation(tmp_path, "a"), None, 0.0)

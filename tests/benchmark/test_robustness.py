@@ -1,27 +1,23 @@
 """omnid-robustness: the perturbation files (level 0 is the calibration, level L moves every camera by L cm
 and turns it by L degrees, seeded draws), the mirror image of the env's bumped cameras, the plan and its
 options (parsed by LeRobot's env config), the tables and the chart, argument errors, resumability with
-stand-in tools; one slow end-to-end run of the real tools at tiny size. (The env options themselves:
-tests/envs/test_gym_robustness_options.py.)"""
+stand-in tools. (The real tools at tiny size: tests/e2e/test_omnid_robustness.py; the env options
+themselves: tests/sim/test_gym_robustness_options.py.)"""
 
 from __future__ import annotations
 
 import dataclasses
 import json
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import draccus
 import gymnasium as gym
 import numpy as np
 import pytest
-from gym_omnid import TRAIN_CAMERAS, WORKSPACE_BOUNDS
+from gym_omnid import TRAIN_CAMERAS
 from lerobot.envs.configs import EnvConfig
-from omnid_jobs import Job, job
-from omnid_testing import TINY_POLICY_FLAGS
+from omnid_testing import checkpoint_config, checkpoint_dir
 
 from lerobot_omnid.benchmark import robustness
 from lerobot_omnid.benchmark.robustness_plan import (
@@ -59,24 +55,6 @@ SIZE = 64
 def calibrations() -> dict[str, dict]:
     """The env's calibrations of cameras B-E at 64 px, keyed like a checkpoint's (built once)."""
     return OmniDEnvConfig(image_size=SIZE).camera_calibrations()
-
-
-def checkpoint_config(policy_type: str, calibrations: dict) -> dict:
-    """The config.json content of a checkpoint of ``policy_type`` with cameras B-E at 64 px."""
-    features = {"observation.state": {"type": "STATE", "shape": [16]}}
-    features |= {image_key(c): {"type": "VISUAL", "shape": [3, SIZE, SIZE]} for c in TRAIN_CAMERAS}
-    config = {"type": policy_type, "input_features": features}
-    if policy_type == "omnid":
-        config |= {"camera_calibration": dict(calibrations), "volume_bounds": WORKSPACE_BOUNDS}
-    return config
-
-
-def checkpoint_dir(root: Path, policy_type: str, calibrations: dict) -> Path:
-    """A folder with the config.json and train_config.json of a checkpoint of ``policy_type``."""
-    root.mkdir(parents=True)
-    (root / "config.json").write_text(json.dumps(checkpoint_config(policy_type, calibrations)))
-    (root / "train_config.json").write_text(json.dumps({"seed": 1000}))
-    return root
 
 
 def flag(cmd, name: str) -> str | None:
@@ -329,6 +307,7 @@ def _fake_eval(calls: list[str], rates: dict[str, float]):
 
 
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, capsys):
+    monkeypatch.setattr(robustness, "code_commit", lambda: "abc123")  # git runs in a subprocess
     omnid = checkpoint_dir(tmp_path / "omnid", "omnid", calibrations)
     dp = checkpoint_dir(tmp_path / "dp", "diffusion", calibrations)
     calls: list[str] = []
@@ -414,85 +393,3 @@ def test_checkpoint_config_errors_name_the_field(tmp_path, calibrations):
     wide = {**config["input_features"], "observation.images.cam_b": {"type": "VISUAL", "shape": [3, 64, 96]}}
     with pytest.raises(ValueError, match="expected square images of one size"):
         checkpoint_from_config("o", tmp_path, {**config, "input_features": wide})
-
-
-@job("robustness", seconds=60)
-def _record_train_robustness(job: Job) -> dict:
-    """omnid-record, lerobot-train, omnid-robustness (the first run; the test reruns it)."""
-    tmp_path = job.tmp
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    bin_dir = Path(sys.executable).parent
-    data, train = tmp_path / "data", tmp_path / "train"
-    record = [
-        str(bin_dir / "omnid-record"),
-        "--task",
-        "select_apple",
-        "--episodes",
-        "1",
-        "--image-size",
-        "32",
-    ]
-    record += ["--cameras", ",".join(TRAIN_CAMERAS), "--root", str(data), "--repo-id", "local/data"]
-    record += ["--static-calibration"]  # omnid-robustness perturbs a checkpoint's static calibration
-    job.run(record, check=True, timeout=300, env=env)
-    cmd = [str(bin_dir / "lerobot-train"), "--dataset.repo_id=local/data", f"--dataset.root={data}"]
-    cmd += [
-        "--dataset.video_backend=pyav",
-        *TINY_POLICY_FLAGS,
-        "--steps=2",
-        "--batch_size=2",
-        "--num_workers=0",
-    ]
-    cmd += ["--save_freq=2", f"--output_dir={train}", "--wandb.enable=false"]
-    ran = {"train": job.run(cmd, timeout=600, env=env)}
-    checkpoint = train / "checkpoints" / "last" / "pretrained_model"
-    out = tmp_path / "robustness"
-    argv = [str(bin_dir / "omnid-robustness"), "--checkpoint", f"tiny={checkpoint}", "--out", str(out)]
-    argv += ["--conditions", "calibration,bumped,dead", "--levels", "0,1", "--draws", "1"]
-    argv += ["--dead-cameras", "cam_b", "--eval-episodes", "1", "--episode-length", "6"]
-    if ran["train"].returncode == 0:
-        ran["robustness"] = job.run(argv, timeout=900, env=env)
-    return {"out": out, "argv": argv, "env": env, **ran}
-
-
-@pytest.mark.slow
-@pytest.mark.jobs("robustness")
-def test_real_tools_end_to_end_tiny(jobs):
-    """A tiny OmniD trained by the real lerobot-train, evaluated by the real lerobot-eval under a calibration
-    error, a bumped camera and a dead camera (removed, black, black from mid-episode); then resumed."""
-    ran = jobs.result("robustness")
-    out, argv, env = ran["out"], ran["argv"], ran["env"]
-    proc = ran["train"]
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    proc = ran["robustness"]
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    assert "6 evaluations: 6 ran" in proc.stdout
-    rows = json.loads((out / "results.json").read_text())["checkpoints"]["tiny"]["rows"]
-    assert [r["condition"] for r in rows] == [
-        "nominal",
-        "calibration",
-        "bumped",
-        "dead_removed",
-        "dead_black",
-        "dead_black_mid",
-    ]
-    assert all(r["episodes"] == 1 for r in rows)
-    assert (out / "robustness_tiny.png").is_file() and "## tiny" in (out / "report.md").read_text()
-    # What lerobot-eval rendered: a calibration error leaves the scene as it was, a bumped camera moves it.
-    nominal, calibration, bumped = (
-        _first_frame(out / "eval" / "tiny" / cell / "seed1")
-        for cell in ("nominal", "calibration/1cm_1deg/draw1", "bumped/1cm_1deg/draw1")
-    )
-    np.testing.assert_array_equal(calibration, nominal)
-    assert np.abs(bumped.astype(int) - nominal).mean() > 1.0
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
-    assert proc.returncode == 0 and "6 evaluations: 6 reused, 0 ran" in proc.stdout
-
-
-def _first_frame(eval_dir: Path) -> np.ndarray:
-    """The first frame of the episode video lerobot-eval wrote into ``eval_dir``."""
-    import av
-
-    (video,) = eval_dir.rglob("*.mp4")
-    with av.open(str(video)) as container:
-        return next(container.decode(video=0)).to_ndarray(format="rgb24")

@@ -21,7 +21,7 @@ import pytest
 from lerobot_omnid.measure.results import EvalRecord, check_comparable, collect, merge, read_summary
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 RESULTS_PAGE = ROOT / "docs" / "results.md"
 HISTORY_PAGE = ROOT / "docs" / "results" / "history.md"
