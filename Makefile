@@ -32,11 +32,11 @@ install: system-deps $(VENV)/.installed
 TEST_WORKERS ?= 2
 
 # The whole suite, tests/e2e (console commands, example scripts) and the slow tests included; what CI runs.
-# Measured on a quiet 2-core machine: 362 s (one process with background jobs before: 377 s).
+# Measured on a quiet 2-core machine: 362 s at c136c17 (one process with background jobs: 377 s at 0eda89a).
 test: install
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 
-# Without tests/e2e: no subprocess at all (tests/conftest.py refuses one anywhere else). Measured: 110 s.
+# Without tests/e2e: no subprocess at all (tests/conftest.py refuses one anywhere else). Measured: 112 s.
 test-fast: install
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) -m "not e2e"
 
