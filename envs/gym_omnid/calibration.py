@@ -1,6 +1,6 @@
 """MuJoCo camera -> OpenCV pinhole calibration (pure numpy functions).
 
-Conventions (DESIGN.md): ``K`` is for an image of ``(height, width)`` with pixel centres at integer
+Conventions (docs/calibration.md): ``K`` is for an image of ``(height, width)`` with pixel centres at integer
 coordinates, u right, v down. ``cam_T_world`` (stored as ``T_cam_world``) maps world points to the
 OpenCV camera frame (x right, y down, z forward), so ``uv_pix = K @ (cam_T_world @ xyz_world)[:3]``
 divided by its third component.
