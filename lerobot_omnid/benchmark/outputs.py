@@ -209,8 +209,9 @@ def write_outputs(
 ) -> dict:
     """summary.json (this folder's evaluations), then report.md, benchmark.png, position_curve.png and
     results.json from them and from the summaries of ``also`` (other folders or summary files)."""
-    entries = [eval_entry(r) for r in runs if r.kind == "eval"]
-    own = [results.record_of(eval_entry(r)) for r in runs if r.kind == "eval" and is_done(r)]
+    evaluations = [r for r in runs if r.kind == "eval"]
+    entries = [eval_entry(r) for r in evaluations]
+    own = [results.record_of(e) for e, r in zip(entries, evaluations, strict=True) if is_done(r)]
     out.mkdir(parents=True, exist_ok=True)
     results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
     groups = [own]
