@@ -112,7 +112,10 @@ def plan(runs: Sequence[Run], out: Path) -> list[Run]:
         unknown = [n for n in run.needs if n not in fingerprints]
         if unknown:
             raise ValueError(f"plan: {run.name} needs {unknown}, which are not planned before it")
-        inputs = [files.setdefault(path, file_fingerprint(path)) for path in run.inputs]
+        for path in run.inputs:
+            if path not in files:  # each file hashed once per plan, however many runs read it
+                files[path] = file_fingerprint(path)
+        inputs = [files[path] for path in run.inputs]
         # Paths inside the campaign's folder count relative to it: a moved or copied folder resumes.
         cmd = [arg.replace(str(out), "<out>") for arg in run.cmd]
         content = json.dumps([cmd, [fingerprints[n] for n in run.needs], inputs])
