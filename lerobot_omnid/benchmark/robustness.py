@@ -66,7 +66,7 @@ from lerobot_omnid.benchmark.robustness_report import (
 )
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.cli import csv_of, int_at_least
-from lerobot_omnid.measure.engine import code_commit, describe_plan, execute, is_done
+from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done
 from lerobot_omnid.measure.results import read_eval_info
 
 COMPARISON_CHART = "robustness_comparison.png"
@@ -220,11 +220,10 @@ def write_calibration_files(
 
 
 def cell_counts(
-    checkpoint: Checkpoint, settings: RobustnessSettings, out: Path
+    checkpoint: Checkpoint, settings: RobustnessSettings, out: Path, done: set[Path]
 ) -> dict[Cell, dict[int, tuple[int, int]]]:
-    """(successes, episodes) per cell of ``checkpoint`` and eval seed, of the evaluations done for this
-    very plan (:func:`lerobot_omnid.measure.engine.is_done`)."""
-    done = {run.output for run in build_runs([checkpoint], settings, out) if is_done(run)}
+    """(successes, episodes) per cell of ``checkpoint`` and eval seed, of the evaluations whose output
+    folders are ``done`` for this very plan (:func:`lerobot_omnid.measure.engine.is_done`)."""
     counts = {}
     for cell in plan_cells(checkpoint, settings):
         found = {
@@ -253,12 +252,15 @@ def describe(checkpoint: Checkpoint, settings: RobustnessSettings) -> str:
 def write_outputs(
     checkpoints: Sequence[Checkpoint],
     settings: RobustnessSettings,
+    runs: Sequence[Run],
     out: Path,
     commit: str | None,
     command: str,
 ) -> dict[str, list]:
-    """report.md, one chart per checkpoint, results.json; returns the rows per checkpoint label."""
-    rows = {c.label: table_rows(cell_counts(c, settings, out)) for c in checkpoints}
+    """report.md, one chart per checkpoint, results.json from the ``runs`` done; returns the rows per
+    checkpoint label."""
+    done = {run.output for run in runs if is_done(run)}
+    rows = {c.label: table_rows(cell_counts(c, settings, out, done)) for c in checkpoints}
     lines = [
         "# Robustness: calibration error, bumped cameras, dead cameras",
         "",
@@ -364,12 +366,12 @@ def main(argv: list[str] | None = None) -> int:
         try:
             status, seconds = execute(runs, out, args.verbose, commit, "robustness")
         except KeyboardInterrupt:
-            write_outputs(checkpoints, settings, out, commit, command)
+            write_outputs(checkpoints, settings, runs, out, commit, command)
             print(
                 f"\nInterrupted: finished evaluations are kept, the one in progress reruns next time; {out}"
             )
             return 130
-    rows = write_outputs(checkpoints, settings, out, commit, command)
+    rows = write_outputs(checkpoints, settings, runs, out, commit, command)
     counts = {s: list(status.values()).count(s) for s in ("reused", "ran", "failed", "blocked")}
     print(
         f"\n{len(runs)} evaluations: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran")
