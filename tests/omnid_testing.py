@@ -21,6 +21,9 @@ from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import Run
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 
+COMMITTED_SUMMARIES = Path(__file__).resolve().parents[1] / "docs" / "results"
+"""The run summaries committed beside docs/results.md, from which each claim's table is rebuilt."""
+
 # Camera eyes around a table whose workspace is centred at (0.5, 0, 0) in the robot base frame.
 SYNTHETIC_EYES = {
     "cam_a": (0.1, 0.0, 1.1),

@@ -16,11 +16,14 @@ hand. A stage made by the same command from the same inputs is not redone; one m
 from __future__ import annotations
 
 import argparse
+import json
+import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS
 
+from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.commands import (
     SIM_VOLUME_BOUNDS,
     control_calibration_command,
@@ -32,12 +35,22 @@ from lerobot_omnid.benchmark.commands import (
 from lerobot_omnid.benchmark.commands import train_command as train_command_base
 from lerobot_omnid.benchmark.plan import MINI, BenchmarkProfile, control_flags, method_flags
 from lerobot_omnid.cli import positive_int
-from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, plan
+from lerobot_omnid.measure.engine import (
+    CHECKPOINT,
+    Run,
+    code_commit,
+    describe_plan,
+    execute,
+    plan,
+    read_stamp,
+)
+from lerobot_omnid.measure.report import short_commit
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference, wilson_interval
 
 EVAL_BATCH_SIZE = 5  # envs each lerobot-eval runs at once: faster than one, the same env seeds
 BLIND = "id_blind"  # the ID evaluation under the blind control
+SUMMARY = "summary.json"  # the run's counts, commits, commands and timings; the report is rebuilt from it
 
 
 @dataclass(frozen=True)
@@ -135,38 +148,62 @@ def blind_margin(id_counts: tuple[int, int], blind_counts: tuple[int, int]) -> s
     )
 
 
-def write_report(
-    path: Path,
-    profile_name: str,
-    rows: list[tuple[str, tuple[int, int], Path]],
-    checkpoint: Path,
-    commands: dict[str, list[str]],
-    timings: dict[str, float],
-) -> str:
-    """Write the report; returns its sentence on the margin over the blind control."""
+def summarise(runs: list[Run], out: Path, profile_name: str) -> dict:
+    """The run's summary: per evaluation its counts and the commit that made it, per stage its command
+    (paths relative to ``out``, so the file says nothing about the machine) and seconds, from the stamps."""
+    stamps = {run.name: read_stamp(run) or {} for run in runs}
+    counts = {run.name: read_eval_info(run.output / "eval_info.json") for run in runs if run.kind == "eval"}
+    return {
+        "profile": profile_name,
+        "evaluations": [
+            {
+                "name": run.name.removeprefix("eval_"),
+                "successes": counts[run.name][0],
+                "episodes": counts[run.name][1],
+                "commit": stamps[run.name].get("commit"),
+            }
+            for run in runs
+            if run.kind == "eval"
+        ],
+        "stages": [
+            {
+                "name": run.name,
+                "seconds": stamps[run.name].get("seconds"),
+                "command": shlex.join(run.cmd).replace(f"{out}/", "").replace(str(commands.BIN) + "/", ""),
+            }
+            for run in runs
+        ],
+    }
+
+
+def write_report(summary: dict, path: Path) -> str:
+    """Write the report from a run's summary (this run's or a committed one); returns its sentence on the
+    margin over the blind control."""
     lines = [
         "# OmniD main job: select_apple, cameras B-E",
         "",
-        f"Profile `{profile_name}`. Checkpoint: `{checkpoint}`. The `{BLIND}` row is the blind control: the "
-        "same checkpoint and env seeds as `id`, every camera turned away from the volume in its calibration "
-        "(no anchor is visible), so only the state drives it.",
+        f"Profile `{summary['profile']}`; paths are relative to the output folder. The `{BLIND}` row is the "
+        "blind control: the same checkpoint and env seeds as `id`, every camera turned away from the volume "
+        "in its calibration (no anchor is visible), so only the state drives it.",
         "",
-        "| evaluation | successes | success rate (%) | Wilson 95 % | videos |",
-        "| --- | --- | --- | --- | --- |",
+        "| evaluation | successes | success rate (%) | Wilson 95 % | code commit | videos |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
-    for name, (successes, n), eval_dir in rows:
-        est = wilson_interval(successes, n)
+    for row in summary["evaluations"]:
+        est = wilson_interval(row["successes"], row["episodes"])
         lines.append(
-            f"| {name} | {successes}/{n} | {100 * est.value:.1f} | "
-            f"{100 * est.low:.1f}-{100 * est.high:.1f} | `{eval_dir / 'videos'}` |"
+            f"| {row['name']} | {row['successes']}/{row['episodes']} | {100 * est.value:.1f} | "
+            f"{100 * est.low:.1f}-{100 * est.high:.1f} | {short_commit(row['commit'])} | "
+            f"`eval_{row['name']}/videos` |"
         )
-    counts = {name: c for name, c, _ in rows}
+    counts = {row["name"]: (row["successes"], row["episodes"]) for row in summary["evaluations"]}
     margin = blind_margin(counts["id"], counts[BLIND])
     lines += ["", margin]
     lines += ["", "## Stages", "", "| stage | seconds | command |", "| --- | --- | --- |"]
-    for name, cmd in commands.items():
-        seconds = f"{timings[name]:.0f}" if name in timings else "(reused)"
-        lines.append(f"| {name} | {seconds} | `{' '.join(cmd)}` |")
+    for stage in summary["stages"]:
+        seconds = "-" if stage["seconds"] is None else f"{stage['seconds']:.0f}"
+        lines.append(f"| {stage['name']} | {seconds} | `{stage['command']}` |")
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return margin
 
@@ -232,7 +269,23 @@ def main(argv: list[str] | None = None) -> int:
         "--episode-length", type=positive_int, help="time limit of evaluation episodes, env steps"
     )
     parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
+    parser.add_argument(
+        "--report-only",
+        action="store_true",
+        help="run nothing: rebuild <out>/report.md from <out>/summary.json or --summary",
+    )
+    parser.add_argument("--summary", type=Path, help="with --report-only: the summary.json to report")
     args = parser.parse_args(argv)
+    out = args.out.resolve()
+    if args.summary and not args.report_only:
+        parser.error("--summary: expected with --report-only, got it without")
+    if args.report_only:
+        source = args.summary or out / SUMMARY
+        if not source.is_file():
+            parser.error(f"--report-only: expected a summary file, got none at {source}")
+        margin = write_report(json.loads(source.read_text()), out / "report.md")
+        print(f"{margin} Report: {out / 'report.md'}")
+        return 0
     base = PROFILES[args.profile]
     profile = Profile(
         episodes=args.episodes or base.episodes,
@@ -242,7 +295,6 @@ def main(argv: list[str] | None = None) -> int:
         eval_episodes=args.eval_episodes or base.eval_episodes,
         policy_flags=base.policy_flags,
     )
-    out = args.out.resolve()
     runs = plan_runs(profile, out, args.device, args.episode_length)
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
@@ -252,17 +304,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     for name in (n for n, s in status.items() if s == "reused"):
         print(f"[{name}] already done (same command and inputs), reusing its result")
-    evaluations = [run for run in runs if run.kind == "eval"]
-    rows = [
-        (run.name.removeprefix("eval_"), read_eval_info(run.output / "eval_info.json"), run.output)
-        for run in evaluations
-    ]
+    summary = summarise(runs, out, args.profile)
+    (out / SUMMARY).write_text(json.dumps(summary, indent=2) + "\n")
     report = out / "report.md"
-    commands = {run.name: list(run.cmd) for run in runs}
-    checkpoint = next(run for run in runs if run.kind == "train").output / CHECKPOINT
-    margin = write_report(report, args.profile, rows, checkpoint, commands, timings)
-    summary = ", ".join(f"{name} {s}/{n}" for name, (s, n), _ in rows)
-    print(f"Done in {sum(timings.values()):.0f} s: success {summary}. {margin} Report: {report}")
+    margin = write_report(summary, report)
+    counts = ", ".join(f"{r['name']} {r['successes']}/{r['episodes']}" for r in summary["evaluations"])
+    print(f"Done in {sum(timings.values()):.0f} s: success {counts}. {margin} Report: {report}")
     return 0
 
 

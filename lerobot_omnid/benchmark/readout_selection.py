@@ -255,44 +255,12 @@ def count_text(counts: list[int] | None) -> str:
 
 def report(out: Path, done: set[Path]) -> dict:
     """``report.md`` and ``summary.json`` from the runs ``done`` (their outputs); returns the summary."""
-    validation = validation_results(out, done)
-    selection = json.loads((out / SELECTION_FILE).read_text()) if (out / SELECTION_FILE).is_file() else None
-    lines = [f"# Choosing the plane readout ({TASK0}, mini sizes)", ""]
-    seeds = f"env seeds {VALIDATION_SEED}-{VALIDATION_SEED + VALIDATION_EPISODES - 1}"
-    lines += [
-        f"Validation: ID success on {seeds}; open-loop error on {VALIDATION_HELDOUT_EPISODES} expert "
-        f"episodes from env seed {VALIDATION_HELDOUT_SEED}. Rule: most successes; within {TIE_MARGIN} of "
-        "the most, the lowest open-loop TCP error.",
-        "",
-        "| readout | validation success (Wilson 95 %) | open-loop TCP (cm) | gripper | selected |",
-        "|---|---|---|---|---|",
-    ]
-    for name, r in validation.items():
-        chosen = "**yes**" if selection and selection["selected"] == name else ""
-        lines.append(
-            f"| {name} | {count_text([r['successes'], r['episodes']])} | {r['position_cm']:.2f} | "
-            f"{r['gripper']:.3f} | {chosen} |"
-        )
     test: dict[str, dict[str, list[int]]] = {}
     for readout in PLANE_READOUTS:
         for setting in (*TEST_SETTINGS, "id_blind"):
             info = eval_dir(out, "test", readout, setting) / "eval_info.json"
             if info.parent in done:
                 test.setdefault(readout, {})[setting] = list(read_eval_info(info))
-    if test and selection:
-        chosen = selection["selected"]
-        lines += [
-            "",
-            f"Test: env seeds {TEST_SEED}-{TEST_SEED + TEST_EPISODES - 1}, the selected `{chosen}` against "
-            f"the paper's `{PAPER_READOUT}`.",
-            "",
-        ]
-        lines += ["| setting | " + " | ".join(test) + " | Fisher p |", "|---|" + "---|" * (len(test) + 1)]
-        for setting in (*TEST_SETTINGS, "id_blind"):
-            cells = [test[r].get(setting) for r in test]
-            p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 and all(cells) else ""
-            lines.append(f"| {setting} | " + " | ".join(map(count_text, cells)) + f" | {p} |")
-    (out / "report.md").write_text("\n".join(lines) + "\n")
     summary = {
         "task": TASK0,
         "steps": PROFILE.steps,
@@ -300,14 +268,60 @@ def report(out: Path, done: set[Path]) -> dict:
         "validation": {
             "seed": VALIDATION_SEED,
             "heldout_seed": VALIDATION_HELDOUT_SEED,
-            "results": validation,
+            "results": validation_results(out, done),
         },
-        "selection": selection,
+        "selection": json.loads((out / SELECTION_FILE).read_text())
+        if (out / SELECTION_FILE).is_file()
+        else None,
         "test": {"seed": TEST_SEED, "results": test},
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print("\n".join(lines))
+    write_report(summary, out / "report.md")
     return summary
+
+
+def write_report(summary: dict, path: Path) -> None:
+    """``report.md`` (validation table with the selection, test table with Fisher tests) from a
+    ``summary.json``, this run's or a committed one."""
+    selection, test = summary["selection"], summary["test"]["results"]
+    lines = [f"# Choosing the plane readout ({summary['task']}, mini sizes)", ""]
+    seeds = (
+        f"env seeds {summary['validation']['seed']}-{summary['validation']['seed'] + VALIDATION_EPISODES - 1}"
+    )
+    lines += [
+        f"Validation: ID success on {seeds}; open-loop error on {VALIDATION_HELDOUT_EPISODES} expert "
+        f"episodes from env seed {summary['validation']['heldout_seed']}. Rule: most successes; within "
+        f"{TIE_MARGIN} of the most, the lowest open-loop TCP error.",
+        "",
+        "| readout | validation success (Wilson 95 %) | open-loop TCP (cm) | gripper | selected |",
+        "|---|---|---|---|---|",
+    ]
+    for name, r in summary["validation"]["results"].items():
+        chosen = "**yes**" if selection and selection["selected"] == name else ""
+        lines.append(
+            f"| {name} | {count_text([r['successes'], r['episodes']])} | {r['position_cm']:.2f} | "
+            f"{r['gripper']:.3f} | {chosen} |"
+        )
+    if test and selection:
+        first = summary["test"]["seed"]
+        lines += [
+            "",
+            f"Test: env seeds {first}-{first + TEST_EPISODES - 1}, the selected `{selection['selected']}` "
+            f"against the paper's `{PAPER_READOUT}`.",
+            "",
+        ]
+        lines += ["| setting | " + " | ".join(test) + " | Fisher p |", "|---|" + "---|" * (len(test) + 1)]
+        for setting in (*TEST_SETTINGS, "id_blind"):
+            cells = [test[r].get(setting) for r in test]
+            p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 and all(cells) else ""
+            lines.append(f"| {setting} | " + " | ".join(map(count_text, cells)) + f" | {p} |")
+        if all(o in test[r] for r in test for o in BACKGROUND_OODS):
+            cells = [[sum(test[r][o][i] for o in BACKGROUND_OODS) for i in (0, 1)] for r in test]
+            p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 else ""
+            lines.append("| unseen tables, pooled | " + " | ".join(map(count_text, cells)) + f" | {p} |")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -325,9 +339,17 @@ def main(argv: list[str] | None = None) -> None:
         "--test", action="store_true", help="evaluate the selected readout and flatten on the test seeds"
     )
     parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
-    parser.add_argument("--report-only", action="store_true")
+    parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
+    parser.add_argument(
+        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
+    )
     args = parser.parse_args(argv)
     out = args.out.resolve()
+    if args.summary:
+        if not args.report_only:
+            parser.error("--summary: expected with --report-only, got it without")
+        write_report(json.loads(args.summary.read_text()), out / "report.md")
+        return
     data = args.data.resolve() if args.data else out / "data" / TRAIN_DATA
     if args.data and (found := commands.recorded_episodes(data)) != PROFILE.episodes:
         parser.error(f"--data: expected a dataset of {PROFILE.episodes} episodes, got {found} in {data}")

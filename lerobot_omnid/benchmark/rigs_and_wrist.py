@@ -16,7 +16,8 @@ only the state drives it. ``--one-rig-checkpoint`` takes an OmniD trained by ``o
 50 scenes and options, calibration in the feature info) instead of training ``one_rig`` here; it is then
 told to read the env's per-frame calibration (``--policy.frame_calibration``). Runs on the experiment
 engine (resumable, ``--dry-run`` prints every command); writes ``<out>/report.md`` (Wilson 95 % intervals,
-Fisher tests of each pair, the code commit of each evaluation, from its stamp) and ``<out>/summary.json``.
+Fisher tests of each pair, the code commit of each evaluation, from its stamp) and ``<out>/summary.json``;
+``--report-only --summary FILE`` rebuilds the report from such a summary alone.
 
     MUJOCO_GL=egl python -m lerobot_omnid.benchmark.rigs_and_wrist --out outputs/rigs_and_wrist \\
         --one-rig-checkpoint outputs/bench_mini/train/omnid/select_apple/checkpoints/last/pretrained_model
@@ -44,7 +45,7 @@ from lerobot_omnid.measure.engine import (
     stamp_commit,
 )
 from lerobot_omnid.measure.results import read_eval_info
-from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
+from lerobot_omnid.measure.stats import fisher_exact, rate_difference, wilson_interval
 
 TASK = "select_apple"
 PROFILE = PROFILES["mini"]
@@ -67,6 +68,7 @@ EVALS = {  # model: (rig, layout) cells
     "wrist": [("default", "id"), *(("default", b) for b in BANDS)],
 }
 PAIRS = {"rigs": ("two_rigs", "one_rig"), "wrist": ("wrist", "one_rig")}
+UNSEEN_RIGS = ("higher", "bumped")  # rigs neither model was trained on: the rigs pair is pooled over them
 
 
 def record(out: Path, name: str) -> list[str]:
@@ -146,49 +148,22 @@ def cells() -> list[tuple[str, str, str, bool]]:
 def report(out: Path, episodes: int, checkpoints: dict[str, Path], runs: list[Run]) -> None:
     """``report.md`` and ``summary.json`` from the evaluations of ``runs`` done for this plan."""
     done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    counts = {}
+    rows = []
     for model, rig, layout, blind in cells():
         folder = eval_dir(out, model, rig, layout, blind)
         if folder in done:
-            counts[model, rig, layout, blind] = read_eval_info(folder / "eval_info.json")
-    rows = []
-    for (model, rig, layout, blind), (s, n) in counts.items():
-        est = wilson_interval(s, n)
-        rows.append(
-            {
-                "model": model,
-                "rig": rig,
-                "layout": layout,
-                "control": "blind" if blind else "",
-                "successes": s,
-                "episodes": n,
-                "rate": est.value,
-                "low": est.low,
-                "high": est.high,
-                "commit": stamp_commit(done[eval_dir(out, model, rig, layout, blind)]),
-            }
-        )
-    commits = ", ".join(sorted({str(r["commit"]) for r in rows})) or "none"
-    lines = [
-        f"# Per-frame calibration: rigs and wrist camera ({TASK}, mini sizes)",
-        "",
-        f"Commits: {commits}.",
-        "",
-    ]
-    lines += ["| model | rig | layout | control | success | Wilson 95 % |", "|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(
-            f"| {r['model']} | {r['rig']} | {r['layout']} | {r['control'] or '-'} | "
-            f"{r['successes']}/{r['episodes']} | {100 * r['low']:.0f}-{100 * r['high']:.0f} % |"
-        )
-    lines += ["", "| pair | rig | layout | A | B | Fisher p |", "|---|---|---|---|---|---|"]
-    for pair, (a, b) in PAIRS.items():
-        for rig, layout in EVALS[a]:
-            if (a, rig, layout, False) in counts and (b, rig, layout, False) in counts:
-                (sa, na), (sb, nb) = counts[a, rig, layout, False], counts[b, rig, layout, False]
-                p = fisher_exact(sa, na, sb, nb)
-                lines.append(f"| {pair}: {a} vs {b} | {rig} | {layout} | {sa}/{na} | {sb}/{nb} | {p:.3g} |")
-    (out / "report.md").write_text("\n".join(lines) + "\n")
+            s, n = read_eval_info(folder / "eval_info.json")
+            rows.append(
+                {
+                    "model": model,
+                    "rig": rig,
+                    "layout": layout,
+                    "control": "blind" if blind else "",
+                    "successes": s,
+                    "episodes": n,
+                    "commit": stamp_commit(done[folder]),
+                }
+            )
     summary = {
         "task": TASK,
         "episodes_per_cell": episodes,
@@ -199,6 +174,47 @@ def report(out: Path, episodes: int, checkpoints: dict[str, Path], runs: list[Ru
         "checkpoints": {m: "given" if m in checkpoints else "trained here" for m in MODELS},
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_report(summary, out / "report.md")
+
+
+def write_report(summary: dict, path: Path) -> None:
+    """``report.md`` (every cell with its Wilson interval, a Fisher test per pair) from a ``summary.json``,
+    this run's or a committed one."""
+    counts = {
+        (r["model"], r["rig"], r["layout"], r["control"] == "blind"): (r["successes"], r["episodes"])
+        for r in summary["results"]
+    }
+    commits = ", ".join(sorted({str(r["commit"]) for r in summary["results"]})) or "none"
+    lines = [f"# Per-frame calibration: rigs and wrist camera ({summary['task']}, mini sizes)", ""]
+    lines += [f"Commits: {commits}.", ""]
+    lines += ["| model | rig | layout | control | success | Wilson 95 % |", "|---|---|---|---|---|---|"]
+    for (model, rig, layout, blind), (s, n) in counts.items():
+        est = wilson_interval(s, n)
+        lines.append(
+            f"| {model} | {rig} | {layout} | {'blind' if blind else '-'} | "
+            f"{s}/{n} | {100 * est.low:.0f}-{100 * est.high:.0f} % |"
+        )
+    lines += ["", "| pair | rig | layout | A | B | Fisher p |", "|---|---|---|---|---|---|"]
+    for pair, (a, b) in PAIRS.items():
+        for rig, layout in EVALS[a]:
+            if (a, rig, layout, False) in counts and (b, rig, layout, False) in counts:
+                (sa, na), (sb, nb) = counts[a, rig, layout, False], counts[b, rig, layout, False]
+                p = fisher_exact(sa, na, sb, nb)
+                lines.append(f"| {pair}: {a} vs {b} | {rig} | {layout} | {sa}/{na} | {sb}/{nb} | {p:.3g} |")
+    a, b = PAIRS["rigs"]
+    unseen = [(a, r, "id", False) for r in UNSEEN_RIGS] + [(b, r, "id", False) for r in UNSEEN_RIGS]
+    if all(cell in counts for cell in unseen):
+        (sa, na), (sb, nb) = (
+            [sum(counts[m, r, "id", False][i] for r in UNSEEN_RIGS) for i in (0, 1)] for m in (a, b)
+        )
+        d = rate_difference(sa, na, sb, nb)
+        difference = f"{100 * d.value:+.1f} pp, {100 * d.low:+.1f} to {100 * d.high:+.1f}"
+        p = fisher_exact(sa, na, sb, nb)
+        rigs = " + ".join(UNSEEN_RIGS)
+        counted = f"{sa}/{na} | {sb}/{nb} | {p:.3g}"
+        lines.append(f"| rigs: {a} vs {b}, pooled ({difference}) | {rigs} | id | {counted} |")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
@@ -232,9 +248,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--one-rig-checkpoint", type=Path, help="a mini OmniD pretrained_model folder")
     parser.add_argument("--eval-episodes", type=int, default=30, help="episodes per cell (default 30)")
     parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
-    parser.add_argument("--report-only", action="store_true")
+    parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
+    parser.add_argument(
+        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
+    )
     args = parser.parse_args(argv)
     out = args.out.resolve()
+    if args.summary:
+        if not args.report_only:
+            parser.error("--summary: expected with --report-only, got it without")
+        write_report(json.loads(args.summary.read_text()), out / "report.md")
+        return
     given = {"one_rig": args.one_rig_checkpoint.resolve()} if args.one_rig_checkpoint else {}
     for path in given.values():
         if not (path / "config.json").is_file():

@@ -15,7 +15,8 @@ in one task's ID setting with the same env seeds throughout:
 
 Writes ``<out>/report.md`` (a table per checkpoint: Wilson intervals, share of the rate as trained, Fisher
 tests; a table across checkpoints), ``<out>/robustness_<label>.png`` (success against the perturbation
-beside the controls' bands) and ``<out>/results.json``. Resumable: an evaluation made by the same command
+beside the controls' bands) and ``<out>/results.json``; ``--report-only --summary FILE`` rebuilds the report
+and charts from such a file alone. Resumable: an evaluation made by the same command
 from the same checkpoint and calibration file is not run again (:mod:`lerobot_omnid.measure.engine`).
 
     omnid-robustness --checkpoint omnid=<pretrained_model> --checkpoint dp=<pretrained_model> --dry-run
@@ -55,12 +56,14 @@ from lerobot_omnid.benchmark.robustness_plan import (
     plan_cells,
 )
 from lerobot_omnid.benchmark.robustness_report import (
+    Row,
     between_lines,
     checkpoint_lines,
     comparison_chart,
     comparison_lines,
     pooled_rows,
     robustness_chart,
+    rows_from_json,
     rows_json,
     table_rows,
 )
@@ -89,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--checkpoint",
         action="append",
-        required=True,
+        default=[],
         metavar="[LABEL=]PATH",
         help="a LeRobot pretrained_model folder, optionally labelled (default label: its policy type); "
         "repeat for several",
@@ -144,6 +147,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--dry-run", action="store_true", help="print every command, run nothing")
     parser.add_argument("--report-only", action="store_true", help="only rebuild the report from results")
+    parser.add_argument(
+        "--summary",
+        type=Path,
+        help="with --report-only: rebuild <out>/report.md from this results.json alone (no --checkpoint)",
+    )
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser
 
@@ -257,17 +265,39 @@ def write_outputs(
     commit: str | None,
     command: str,
 ) -> dict[str, list]:
-    """report.md, one chart per checkpoint, results.json from the ``runs`` done; returns the rows per
-    checkpoint label."""
+    """results.json, report.md and the charts from the ``runs`` done; returns the rows per checkpoint
+    label."""
     done = {run.output for run in runs if is_done(run)}
     rows = {c.label: table_rows(cell_counts(c, settings, out, done)) for c in checkpoints}
+    results = {
+        "settings": dataclasses.asdict(settings),
+        "commit": commit,
+        "command": command,
+        "checkpoints": {
+            c.label: {
+                "path": str(c.path),
+                "description": describe(c, settings),
+                "rows": rows_json(rows[c.label]),
+            }
+            for c in checkpoints
+        },
+    }
+    (out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    write_report(results, rows, out)
+    return rows
+
+
+def write_report(results: Mapping[str, Any], rows: Mapping[str, Sequence[Row]], out: Path) -> None:
+    """``<out>/report.md`` and its charts from a ``results.json`` (this run's or a committed one) and its
+    rows per checkpoint label."""
+    settings = results["settings"]
     lines = [
         "# Robustness: calibration error, bumped cameras, dead cameras",
         "",
-        f"Command: `{command}`; code commit {commit}. Perturbation level L: every camera moved by L cm in a "
-        f"random direction and turned by L degrees about a random axis (seeded draws per level: "
-        f"{settings.draws}, perturbation seed {settings.perturbation_seed}; level 0 is the checkpoint as "
-        "trained). "
+        f"Command: `{results['command']}`; code commit {results['commit']}. Perturbation level L: every "
+        "camera moved by L cm in a random direction and turned by L degrees about a random axis (seeded "
+        f"draws per level: {settings['draws']}, perturbation seed {settings['perturbation_seed']}; level 0 "
+        "is the checkpoint as trained). "
         "Success % with Wilson 95 % intervals; against as trained: difference with Newcombe's interval, "
         "two-sided Fisher exact test.",
         "",
@@ -284,29 +314,25 @@ def write_outputs(
             *between,
             "",
         ]
+    out.mkdir(parents=True, exist_ok=True)
     if len(evaluated) > 1:
         chart = comparison_chart(evaluated, out / COMPARISON_CHART)
         lines += [f"![the checkpoints side by side]({chart.name})", ""]
-    for checkpoint in checkpoints:
+    for label, checkpoint in results["checkpoints"].items():
         chart = None
-        if rows[checkpoint.label]:
-            chart = robustness_chart(
-                checkpoint.label, rows[checkpoint.label], out / f"robustness_{checkpoint.label}.png"
-            )
-        lines += checkpoint_lines(
-            checkpoint.label, describe(checkpoint, settings), rows[checkpoint.label], chart and chart.name
-        )
+        if rows[label]:
+            chart = robustness_chart(label, rows[label], out / f"robustness_{label}.png")
+        description = checkpoint.get("description", f"`{checkpoint['path']}`")
+        lines += checkpoint_lines(label, description, rows[label], chart and chart.name)
     (out / "report.md").write_text("\n".join(lines))
-    results = {
-        "settings": dataclasses.asdict(settings),
-        "commit": commit,
-        "command": command,
-        "checkpoints": {
-            c.label: {"path": str(c.path), "rows": rows_json(rows[c.label])} for c in checkpoints
-        },
-    }
-    (out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    return rows
+
+
+def report_from_results(path: Path, out: Path) -> None:
+    """Rebuild ``<out>/report.md`` and its charts from a committed ``results.json`` alone."""
+    results = json.loads(path.read_text())
+    rows = {label: rows_from_json(c["rows"]) for label, c in results["checkpoints"].items()}
+    write_report(results, rows, out)
+    print(f"report: {out / 'report.md'} (from {path})")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -314,6 +340,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.dry_run and args.report_only:
         parser.error("--dry-run and --report-only: expected at most one of them, got both")
+    if args.summary:
+        if not args.report_only:
+            parser.error("--summary: expected with --report-only, got it without")
+        report_from_results(args.summary, args.out.resolve())
+        return 0
+    if not args.checkpoint:
+        parser.error("--checkpoint: expected at least one [LABEL=]PATH, got none")
     if min(args.levels) < 0:
         parser.error(f"--levels: expected numbers >= 0 (cm and degrees), got {list(args.levels)}")
     if args.draws >= DRAW_SEED_STRIDE:

@@ -288,6 +288,23 @@ def rows_json(rows: Sequence[Row]) -> list[dict[str, Any]]:
     ]
 
 
+def rows_from_json(items: Sequence[Mapping[str, Any]]) -> list[Row]:
+    """The rows of :func:`rows_json`'s output, so that a committed ``results.json`` rebuilds the report."""
+    return [
+        Row(
+            item["condition"],
+            CellResult(item["successes"], item["episodes"], ()),
+            level=item["level"],
+            camera=item["camera"],
+            parts=tuple((name, k, n) for name, k, n in item["parts"]),
+            as_trained=CellResult(*item["as_trained_same_seeds"], ())
+            if item["as_trained_same_seeds"]
+            else None,
+        )
+        for item in items
+    ]
+
+
 def _plot_series(
     ax: Any, x: Sequence[float], points: Sequence[Row], colour: str, label: str, joined: bool
 ) -> None:

@@ -1,6 +1,8 @@
 """The README's main job (`omnid-demo`): its report's blind-control margin, argument errors, the CPU profile's
 training command. (The command at tiny sizes: tests/e2e/test_omnid_demo.py.)"""
 
+import json
+
 import pytest
 from gym_omnid import TRAIN_CAMERAS
 
@@ -8,21 +10,50 @@ from lerobot_omnid.benchmark.demo import PROFILES, blind_margin, main, train_com
 from lerobot_omnid.benchmark.plan import MINI, method_flags
 
 
+def summary(id_counts: tuple[int, int], blind_counts: tuple[int, int]) -> dict:
+    evaluations = [("id", id_counts), ("position_ood", (1, 10)), ("id_blind", blind_counts)]
+    return {
+        "profile": "cpu",
+        "evaluations": [
+            {"name": name, "successes": s, "episodes": n, "commit": "0123456789abcdef"}
+            for name, (s, n) in evaluations
+        ],
+        "stages": [{"name": "train", "seconds": 806.4, "command": "lerobot-train --steps=1000"}],
+    }
+
+
 def test_report_gives_the_blind_control_beside_the_success_rate(tmp_path):
-    rows = [("id", (7, 10), tmp_path / "a"), ("position_ood", (1, 10), tmp_path / "b")]
-    rows.append(("id_blind", (0, 10), tmp_path / "c"))
-    margin = write_report(tmp_path / "report.md", "cpu", rows, tmp_path / "ck", {}, {})
+    margin = write_report(summary((7, 10), (0, 10)), tmp_path / "report.md")
     report = (tmp_path / "report.md").read_text()
-    assert "| id | 7/10 | 70.0 | 39.7-89.2 |" in report and "| id_blind | 0/10 | 0.0 | 0.0-27.8 |" in report
-    # Known values (docs/results.md, the mini OmniD against its blind control): +70, Newcombe +28.9 to +89.2.
+    assert "| id | 7/10 | 70.0 | 39.7-89.2 | 0123456789ab |" in report
+    assert "| id_blind | 0/10 | 0.0 | 0.0-27.8 |" in report
+    assert "| train | 806 | `lerobot-train --steps=1000` |" in report
+    # Known values (the mini OmniD against its blind control): +70, Newcombe +28.9 to +89.2.
     assert margin in report
     assert "+70.0 points (Newcombe 95 % +28.9 to +89.2), two-sided Fisher p = 0.0031" in margin
     assert "significantly above its blind control" in margin
-    assert "not distinguishable" in blind_margin((3, 10), (2, 10))  # the demo's checkpoint of issue 18
+    assert "not distinguishable" in blind_margin((3, 10), (2, 10))
+
+
+def test_report_only_rebuilds_the_report_from_a_summary_and_runs_nothing(tmp_path, capsys):
+    source = tmp_path / "kept.json"
+    source.write_text(json.dumps(summary((8, 10), (1, 10))))
+    out = tmp_path / "out"
+    assert main(["--out", str(out), "--report-only", "--summary", str(source)]) == 0
+    assert "| id | 8/10 | 80.0 |" in (out / "report.md").read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["report.md"]
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path / "empty"), "--report-only"])
+    assert "--report-only: expected a summary file, got none at" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
-    ("argv", "message"), [(["--steps", "0"], "--steps"), (["--profile", "tpu"], "--profile")]
+    ("argv", "message"),
+    [
+        (["--steps", "0"], "--steps"),
+        (["--profile", "tpu"], "--profile"),
+        (["--summary", "s.json"], "--summary: expected with --report-only"),
+    ],
 )
 def test_bad_arguments_name_the_option(argv, message, capsys):
     with pytest.raises(SystemExit):

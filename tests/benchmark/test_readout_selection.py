@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from omnid_testing import COMMITTED_SUMMARIES
 
 from lerobot_omnid.benchmark import readout_selection as rs
 from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, HELDOUT_SEED, PROFILES
@@ -131,3 +132,15 @@ def test_data_of_another_size_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         rs.main(["--out", str(tmp_path / "out"), "--data", str(data)])
     assert "--data: expected a dataset of 50 episodes, got 3" in capsys.readouterr().err
+
+
+def test_report_only_rebuilds_the_committed_tables_from_their_summary_alone(tmp_path, capsys):
+    """``--report-only --summary`` needs no run folder: the committed summary gives the validation table
+    with its selection and the test table that docs/results.md quotes, the pooled unseen tables included."""
+    summary = COMMITTED_SUMMARIES / "readouts_seed1000_cpu2.json"
+    rs.main(["--out", str(tmp_path), "--report-only", "--summary", str(summary)])
+    report = (tmp_path / "report.md").read_text()
+    assert "| keypoints | 13/20 (43.3-81.9 %) | 0.83 | 0.030 | **yes** |" in report
+    assert "| id | 2/30 (1.8-21.3 %) | 24/30 (62.7-90.5 %) | 7.51e-09 |" in report
+    assert "| unseen tables, pooled | 10/120 (4.6-14.7 %) | 26/120 (15.2-29.9 %) | 0.0061 |" in report
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.md"]

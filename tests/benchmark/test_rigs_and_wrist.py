@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 import pytest
+from omnid_testing import COMMITTED_SUMMARIES
 
 from lerobot_omnid.benchmark import rigs_and_wrist as rw
 from lerobot_omnid.measure import engine
@@ -71,3 +72,21 @@ def test_report_gives_each_evaluation_its_own_commit_and_tests_the_pairs(tmp_pat
     report = (tmp_path / "report.md").read_text()
     assert "Commits: aaa, bbb." in report
     assert "| rigs: two_rigs vs one_rig | higher | id | 7/30 | 4/30 | 0.506 |" in report
+
+
+def test_report_only_rebuilds_the_committed_table_from_its_summary_alone(tmp_path, capsys):
+    """``--report-only --summary`` needs no run folder: the committed summary gives every cell and the
+    pooled unseen-rig comparison that docs/results.md quotes."""
+    summary = COMMITTED_SUMMARIES / "rigs_and_wrist_cpu2.json"
+    rw.main(["--out", str(tmp_path), "--report-only", "--summary", str(summary)])
+    report = (tmp_path / "report.md").read_text()
+    assert "| two_rigs | higher | id | - | 7/30 | 12-41 % |" in report
+    pooled = "pooled (+5.0 pp, -11.3 to +21.0) | higher + bumped | id | 20/60 | 17/60 | 0.693 |"
+    assert pooled in report
+    assert not (tmp_path / "eval").exists()
+
+
+def test_summary_without_report_only_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        rw.main(["--out", str(tmp_path), "--summary", str(COMMITTED_SUMMARIES / "rigs_and_wrist_cpu2.json")])
+    assert "--summary: expected with --report-only" in capsys.readouterr().err

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from gym_omnid import TRAIN_CAMERAS
 from lerobot.envs.configs import EnvConfig
-from omnid_testing import checkpoint_config, checkpoint_dir
+from omnid_testing import COMMITTED_SUMMARIES, checkpoint_config, checkpoint_dir
 
 from lerobot_omnid.benchmark import robustness
 from lerobot_omnid.benchmark.robustness_plan import (
@@ -335,6 +335,12 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, caps
     stamp = json.loads((out / "stamps" / "omnid" / "nominal" / "seed1.json").read_text())
     assert "lerobot-eval" in stamp["command"] and len(stamp["fingerprint"]) == 16
     assert len(list((out / "calibration" / "omnid").rglob("*.json"))) == 2 * 2 + 2
+    # Its results.json alone rebuilds the same report, with no checkpoint and no run folder.
+    rebuilt = tmp_path / "rebuilt"
+    argv_summary = ["--out", str(rebuilt), "--report-only", "--summary", str(out / "results.json")]
+    assert robustness.main(argv_summary) == 0
+    assert (rebuilt / "report.md").read_text() == report
+    assert (rebuilt / robustness.COMPARISON_CHART).is_file() and not (rebuilt / "stamps").exists()
     # Resumed: nothing runs again; a new level adds only its runs.
     calls.clear()
     assert robustness.main(argv) == 0 and calls == []
@@ -369,12 +375,16 @@ def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations,
         (["--conditions", "calibration,nope"], "--conditions: expected comma-separated distinct values"),
         (["--dry-run", "--report-only"], "expected at most one of them"),
         (["DUP"], "expected a distinct label"),
+        (["--summary", "results.json"], "--summary: expected with --report-only"),
+        (["NONE", "--out", "o"], "--checkpoint: expected at least one [LABEL=]PATH, got none"),
     ],
 )
 def test_bad_arguments_are_named(argv, expected, tmp_path, calibrations, capsys):
     omnid = checkpoint_dir(tmp_path / "omnid", "omnid", calibrations)
     if argv == ["DUP"]:
         argv = ["--checkpoint", f"a={omnid}", "--checkpoint", f"a={omnid}"]
+    elif argv[0] == "NONE":
+        argv = argv[1:]
     elif "--checkpoint" not in argv:
         argv = ["--checkpoint", str(omnid), *argv]
     with pytest.raises(SystemExit):
@@ -393,3 +403,14 @@ def test_checkpoint_config_errors_name_the_field(tmp_path, calibrations):
     wide = {**config["input_features"], "observation.images.cam_b": {"type": "VISUAL", "shape": [3, 64, 96]}}
     with pytest.raises(ValueError, match="expected square images of one size"):
         checkpoint_from_config("o", tmp_path, {**config, "input_features": wide})
+
+
+def test_report_only_rebuilds_the_committed_table_from_its_summary_alone(tmp_path, capsys):
+    """The committed results.json of the three-checkpoint sweep rebuilds the table docs/results.md quotes."""
+    summary = COMMITTED_SUMMARIES / "robustness_mini_three_cpu2.json"
+    assert robustness.main(["--out", str(tmp_path), "--report-only", "--summary", str(summary)]) == 0
+    report = (tmp_path / "report.md").read_text()
+    row = "| calibration error (scene unchanged) | 1 cm, 1 deg | 73 (56-86), 22/30 | 37 (22-54), 11/30 | - |"
+    assert row in report
+    assert "| dead camera, black from mid-episode | any one | 70 (55-82), 28/40 |" in report
+    assert (tmp_path / "robustness_omnid_noise.png").is_file()

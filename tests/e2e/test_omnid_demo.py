@@ -1,5 +1,6 @@
 """The README's main job (`omnid-demo`) at tiny sizes: record, train, evaluate, report; resumable."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -27,8 +28,13 @@ def test_main_job_writes_report_and_reuses_finished_stages(first_demo_run):
         assert row in report, row
     assert "| blind_calibration |" in report and "Margin over the blind control in ID" in report
     assert "lerobot-train" in report and "--env_eval_freq=1" in report and "--policy.type=omnid" in report
-    blind_file = out / "controls" / "blind.json"
-    assert blind_file.is_file() and f"--policy.calibration_path={blind_file}" in report
+    assert (
+        out / "controls" / "blind.json"
+    ).is_file() and "--policy.calibration_path=controls/blind.json" in report
+    assert str(out) not in report  # paths relative to the output folder: a committed summary names no machine
+    summary = json.loads((out / "summary.json").read_text())
+    assert [e["name"] for e in summary["evaluations"]] == ["id", "position_ood", "id_blind"]
+    assert all(stage["seconds"] is not None for stage in summary["stages"])
     assert (out / "train" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors").is_file()
     assert list((out / "eval_id" / "videos").rglob("*.mp4"))
     assert (out / "logs" / "train.log").is_file()
@@ -39,3 +45,9 @@ def test_main_job_writes_report_and_reuses_finished_stages(first_demo_run):
     )
     assert rerun.returncode == 0
     assert rerun.stdout.count("already done") == 6
+    # The summary alone rebuilds the same report.
+    (out / "report.md").unlink()
+    rebuilt = subprocess.run(
+        [str(OMNID_DEMO), "--out", str(out), "--report-only"], capture_output=True, text=True
+    )
+    assert rebuilt.returncode == 0 and (out / "report.md").read_text() == report
