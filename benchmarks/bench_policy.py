@@ -7,6 +7,7 @@ its own fresh process (so peak memory is its own) and the ratios are printed sid
     python benchmarks/bench_policy.py --profile paper    # the paper's (64x16x64 grid, 4 cameras, 480x480,
                                                          # batch 8); use --device cuda on a GPU machine
 
+``--json FILE`` keeps a run's numbers and ``--report-only FILE`` prints its table again.
 ``--against FIELD=JSON`` times instead OmniD with and without an option, in one process with their
 training steps alternating (A B, B A, ...), so a busy machine slows both alike and the printed ratio stays
 meaningful where absolute times do not (e.g. on 2 shared CPU cores):
@@ -243,7 +244,16 @@ def main() -> None:
         metavar="FIELD=JSON",
         help="time OmniD with these OmniDConfig fields against the profile's OmniD (steps alternating)",
     )
+    parser.add_argument(
+        "--report-only", metavar="JSON", help="measure nothing: print the table of a --json file"
+    )
     args = parser.parse_args()
+    if args.report_only:
+        with open(args.report_only) as f:
+            summary = json.load(f)
+        print(f"profile={summary['profile']} device={summary['device']}")
+        print("\n".join(report_lines(summary)))
+        return
 
     base = PROFILES[args.profile]
     overrides = parse_overrides(parser, "--omnid", args.omnid)
@@ -275,23 +285,31 @@ def main() -> None:
             raise SystemExit(f"{name}: measurement process failed with exit code {proc.exitcode}")
         results.append(queue.get())
 
-    header = f"{'policy':<10} {'params':>9} {'train step':>11} {'select_action':>14} {'train peak mem':>15}"
-    print(header)
+    summary = {"profile": args.profile, "device": args.device, "repeats": args.repeats, "results": results}
+    print("\n".join(report_lines(summary)))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(summary, f, indent=2)
+
+
+def report_lines(summary: dict) -> list[str]:
+    """The table of a run (its ``--json`` file): per policy parameters, median training step and
+    ``select_action`` time, peak training memory; the ratios of the first policy to the second."""
+    results = summary["results"]
+    lines = [f"{'policy':<10} {'params':>9} {'train step':>11} {'select_action':>14} {'train peak mem':>15}"]
     for r in results:
-        print(
+        lines.append(
             f"{r['policy']:<10} {r['params_M']:>8.1f}M {r['train_step_s']:>10.3f}s "
             f"{r['select_action_s']:>13.3f}s {r['train_peak_MiB']:>11.0f} MiB"
         )
     if len(results) == 2:
         a, b = results
-        print(
+        lines.append(
             f"ratio {a['policy']}/{b['policy']}: train step {a['train_step_s'] / b['train_step_s']:.2f}x, "
             f"select_action {a['select_action_s'] / b['select_action_s']:.2f}x, "
             f"peak memory {a['train_peak_MiB'] / b['train_peak_MiB']:.2f}x"
         )
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"profile": args.profile, "device": args.device, "results": results}, f, indent=2)
+    return lines
 
 
 if __name__ == "__main__":

@@ -24,7 +24,8 @@ scrambles the object's position as much as a new layout would.
 
 Records (once) 10 expert episodes per setting from env seed 400000, disjoint from every other seed set
 of the benchmark (docs/benchmark.md#seeds), with the checkpoints' cameras and image size. Writes
-``<out>/results.json`` and prints a table.
+``<out>/results.json`` and ``<out>/report.md``; ``--report-only RESULTS...`` rebuilds the report from such
+files alone (several runs' side by side).
 """
 
 from __future__ import annotations
@@ -175,16 +176,37 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--train-root", type=Path, required=True, help="the checkpoints' training dataset")
+    parser.add_argument("--train-root", type=Path, help="the checkpoints' training dataset")
     parser.add_argument(
-        "--checkpoint", action="append", required=True, help="NAME=pretrained_model folder (repeatable)"
+        "--checkpoint", action="append", default=[], help="NAME=pretrained_model folder (repeatable)"
     )
     parser.add_argument("--episodes", type=int, default=10, help="expert episodes per probe setting")
     parser.add_argument(
         "--tables", default="", help="unseen table textures to probe too, comma-separated (e.g. ood1,ood2)"
     )
     parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--report-only",
+        nargs="+",
+        type=Path,
+        metavar="RESULTS",
+        help="probe nothing: merge these results.json files (committed summaries) into <out>/report.md",
+    )
     args = parser.parse_args(argv)
+    if args.report_only:
+        merged: dict[str, dict] = {}
+        for path in args.report_only:
+            for name, result in json.loads(path.read_text()).items():
+                if name in merged:
+                    parser.error(f"--report-only: expected each model once, got {name!r} again in {path}")
+                merged[name] = result
+        write_report(merged, args.out / "report.md")
+        return 0
+    if args.train_root is None or not args.checkpoint:
+        parser.error(
+            "--train-root and --checkpoint: expected both (or --report-only), got "
+            + ("neither" if args.train_root is None and not args.checkpoint else "only one")
+        )
     tables = [t for t in args.tables.split(",") if t]
     for table in tables:
         if table not in BACKGROUNDS[1:]:
@@ -215,19 +237,29 @@ def main(argv: list[str] | None = None) -> int:
             results[name]["sets"][t]["table_shift"] = table_shift(train[0], validation[0], sets[t][0])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    names = list(results)
-    print("| set | " + " | ".join(f"{n} probe (cm)" for n in names) + " | training mean (cm) |")
-    print("| --- |" + " --- |" * (len(names) + 1))
-    for s in results[names[0]]["sets"]:
-        row = [f"{results[n]['sets'][s]['probe_cm']:.2f}" for n in names]
-        print(f"| {s} | " + " | ".join(row) + f" | {results[names[0]]['sets'][s]['mean_cm']:.2f} |")
-    if tables:
-        print("\n| table | " + " | ".join(f"{n} table shift" for n in names) + " |")
-        print("| --- |" + " --- |" * len(names))
-        for t in tables:
-            shifts = [f"{results[n]['sets'][t]['table_shift']:.2f}" for n in names]
-            print(f"| {t} | " + " | ".join(shifts) + " |")
+    write_report(results, args.out / "report.md")
     return 0
+
+
+def write_report(results: dict[str, dict], path: Path) -> None:
+    """The probe's tables (error per set and model; with tables, each table's shift) from ``results.json``
+    contents, one run's or several merged, written to ``path`` and printed."""
+    names = list(results)
+    lines = ["| set | " + " | ".join(f"{n} probe (cm)" for n in names) + " | training mean (cm) |"]
+    lines.append("| --- |" + " --- |" * (len(names) + 1))
+    for s in results[names[0]]["sets"]:
+        row = [f"{results[n]['sets'][s]['probe_cm']:.2f}" if s in results[n]["sets"] else "-" for n in names]
+        lines.append(f"| {s} | " + " | ".join(row) + f" | {results[names[0]]['sets'][s]['mean_cm']:.2f} |")
+    tables = [s for s in results[names[0]]["sets"] if "table_shift" in results[names[0]]["sets"][s]]
+    if tables:
+        lines += ["", "| table | " + " | ".join(f"{n} table shift" for n in names) + " |"]
+        lines.append("| --- |" + " --- |" * len(names))
+        for t in tables:
+            shifts = [f"{results[n]['sets'][t].get('table_shift', float('nan')):.2f}" for n in names]
+            lines.append(f"| {t} | " + " | ".join(shifts) + " |")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionPolicy
-from omnid_testing import tiny_diffusion_config
+from omnid_testing import COMMITTED_SUMMARIES, tiny_diffusion_config
 
 from lerobot_omnid.diagnostics import position_extrapolation as pe
 
@@ -71,4 +71,26 @@ def test_table_shift_is_zero_for_twins_and_near_root_two_for_strangers():
     units = torch.tensor([1.0, 10.0, 0.1, 3.0, 1e3, 1e-2])
     assert pe.table_shift(train * units, reference * units, nudged * units) == pytest.approx(
         pe.table_shift(train, reference, nudged)
+    )
+
+
+def test_report_only_sets_committed_summaries_side_by_side(tmp_path, capsys):
+    """The committed summaries of two runs rebuild docs/results.md's probe tables with no checkpoint."""
+    runs = ["position_tables_seed1002_cpu2.json", "position_tables_seed1001_cpu2.json"]
+    assert (
+        pe.main(["--out", str(tmp_path), "--report-only", *(str(COMMITTED_SUMMARIES / r) for r in runs)]) == 0
+    )
+    report = (tmp_path / "report.md").read_text()
+    assert "| validation (id) | 0.74 | 2.30 | 0.82 | 0.96 | 4.47 |" in report
+    assert "| ood3 | 0.74 | 26.12 | 0.63 | 114.31 |" in report
+    with pytest.raises(SystemExit):
+        pe.main(
+            ["--out", str(tmp_path), "--report-only", *(str(COMMITTED_SUMMARIES / r) for r in runs[:1] * 2)]
+        )
+    assert "expected each model once, got 'omnid_seed1002' again" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        pe.main(["--out", str(tmp_path)])
+    assert (
+        "--train-root and --checkpoint: expected both (or --report-only), got neither"
+        in capsys.readouterr().err
     )
