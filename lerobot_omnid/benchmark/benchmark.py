@@ -27,10 +27,10 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from lerobot_omnid.benchmark.methods import METHODS
 from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs
 from lerobot_omnid.benchmark.plan import (
     LABELS,
-    METHODS,
     PROFILES,
     SETTINGS,
     BenchmarkProfile,

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import torch
 
-from lerobot_omnid.benchmark.plan import CONTROLS, PERTURBED_LEVEL
+from lerobot_omnid.benchmark.methods import CONTROLS, PERTURBED_LEVEL
 from lerobot_omnid.benchmark.robustness_plan import camera_offsets, perturbed_calibrations
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration

@@ -33,7 +33,8 @@ from lerobot_omnid.benchmark.commands import (
     record_command,
 )
 from lerobot_omnid.benchmark.commands import train_command as train_command_base
-from lerobot_omnid.benchmark.plan import MINI, BenchmarkProfile, control_flags, method_flags
+from lerobot_omnid.benchmark.methods import control_flags, method_flags
+from lerobot_omnid.benchmark.plan import MINI, BenchmarkProfile
 from lerobot_omnid.cli import positive_int
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,

@@ -14,31 +14,33 @@ from pathlib import Path
 
 from gym_omnid.constants import POSITION_BANDS, TRAIN_CAMERAS
 
-from lerobot_omnid.benchmark.plan import (
+from lerobot_omnid.benchmark.methods import (
     ABLATIONS,
-    BACKGROUND_OODS,
-    BANDS,
     CONTROL_LABELS,
     CONTROLS,
+    METHODS,
+    VQBET_CAMERA,
+    ablation_flags,
+    control_flags,
+    finetune_flags,
+    method_controls,
+    method_flags,
+)
+from lerobot_omnid.benchmark.plan import (
+    BACKGROUND_OODS,
+    BANDS,
     EVAL_SEED_STRIDE,
     FEWSHOT,
     FEWSHOT_SEED,
     HELDOUT_SEED,
     LABELS,
-    METHODS,
     OFFLINE_OUTPUT,
     SETTINGS,
     TASK0,
     TASK1,
-    VQBET_CAMERA,
     BenchmarkProfile,
-    ablation_flags,
-    control_flags,
     control_setting,
-    finetune_flags,
     heldout_settings,
-    method_controls,
-    method_flags,
     seed_folder,
 )
 from lerobot_omnid.measure import charts, report, results

@@ -1,5 +1,5 @@
-"""What ``omnid-benchmark`` runs: its profiles, the LeRobot options of each method (every option that differs
-from the policy's default comes with its reason) and the plan of record / train / eval runs.
+"""What ``omnid-benchmark`` runs: its profiles and the plan of record / train / eval runs (each method's
+LeRobot options, with their reasons, come from :mod:`lerobot_omnid.benchmark.methods`).
 
 Pure: builds command lines and paths from a profile, runs nothing. The protocol (docs/benchmark.md, section 4
 of the paper): cameras B-E for training; every task's ID success; on task 0 position OOD, the graded position
@@ -12,7 +12,6 @@ recordings is repeated per training seed.
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -20,22 +19,29 @@ from pathlib import Path
 
 import gym_omnid.constants
 from gym_omnid import TRAIN_CAMERAS
-from gym_omnid.constants import POSITION_BANDS, STATE_DIM
+from gym_omnid.constants import POSITION_BANDS
 
 from lerobot_omnid.benchmark.commands import (
     BIN,
-    SIM_VOLUME_BOUNDS,
     control_calibration_command,
     eval_command,
-    json_list,
     record_command,
     train_command,
+)
+from lerobot_omnid.benchmark.methods import (
+    ABLATIONS,
+    CAMERA_A,
+    METHODS,
+    VQBET_CAMERA,
+    ablation_flags,
+    control_flags,
+    finetune_flags,
+    method_controls,
+    method_flags,
 )
 from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.measure.engine import Run, plan
 
-METHODS = ("omnid", "diffusion", "act", "vqbet")
-"""LeRobot policy types, in the order of the paper's tables."""
 LABELS = {
     "omnid": "OmniD",
     "diffusion": "DP",
@@ -49,29 +55,13 @@ TASK0, TASK1 = "select_apple", "select_chemistry_tube"  # the paper's task 0 and
 BACKGROUND_OODS = ("ood1", "ood2", "ood3", "ood4")
 BANDS = tuple(POSITION_BANDS)  # position_band_1 .. _4: the position-shift curve's settings
 SETTINGS = ("id", "position_ood", *BACKGROUND_OODS, *BANDS)
-CONTROLS = ("blind", "scrambled", "perturbed")
-"""Evaluations of a trained checkpoint that test what drives it (see :func:`control_flags`)."""
-PERTURBED_LEVEL = 2.0
-"""cm and degrees by which the ``perturbed`` control moves and turns every camera (a carelessly measured
-rig; ``omnid-robustness`` measures the whole curve, and this is its first draw at this level)."""
-CONTROL_LABELS = {
-    "blind": "blind",
-    "scrambled": "scrambled geometry",
-    "perturbed": f"calibration off by {PERTURBED_LEVEL:g} cm and {PERTURBED_LEVEL:g} deg",
-}
-ABLATIONS = ("omnid_resnet101", "omnid_no_ofg", "omnid_cam_a")
 FEWSHOT = "fewshot_a"
 """Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
-CAMERA_A = ("cam_a",)
-VQBET_CAMERA = ("cam_b",)  # LeRobot's VQ-BeT takes exactly one image
 TRAIN_SEED = 1000  # lerobot-train --seed (LeRobot's default): same init RNG and batch order for every method
 EVAL_SEED_STRIDE = 1000  # eval seed k runs env seeds k*1000 ... k*1000 + episodes - 1
 FEWSHOT_SEED = 100_000  # first env seed of the few-shot recordings (training sets start at 0)
 HELDOUT_SEED = 200_000  # first env seed of the held-out expert recordings of the open-loop diagnostic
 OFFLINE_OUTPUT = "offline_eval.json"  # written by omnid-offline-eval into an offline run's folder
-
-Flag = tuple[str, str]
-"""A command-line option and why it is set."""
 
 
 @dataclass(frozen=True)
@@ -147,185 +137,6 @@ def available_tasks() -> tuple[str, ...]:
     return tuple(gym_omnid.constants.TASKS)
 
 
-def input_features(cameras: Sequence[str], image_size: int) -> str:
-    """``--policy.input_features`` JSON: the state and the images of ``cameras`` (the policy's inputs)."""
-    features = {"observation.state": {"type": "STATE", "shape": [STATE_DIM]}}
-    for cam in cameras:
-        features[f"observation.images.{cam}"] = {"type": "VISUAL", "shape": [3, image_size, image_size]}
-    return json.dumps(features, separators=(",", ":"))
-
-
-NO_DOWNLOAD = "offline: no pretrained torchvision weights (nothing is downloaded); all methods start from a "
-NO_DOWNLOAD += "randomly initialised ResNet, as OmniD does"
-GROUP_NORM = "GroupNorm instead of BatchNorm for a backbone trained from scratch on small batches of "
-GROUP_NORM += "correlated frames, as OmniD and the Diffusion Policy paper do"
-NO_CROP = (
-    "no crop: OmniD never crops (it would invalidate the intrinsics), so every method sees the same pixels"
-)
-
-
-def diffusion_head_flags(p: BenchmarkProfile) -> list[Flag]:
-    """Options of LeRobot's conditional UNet and its schedule, the same for OmniD and DP."""
-    if not p.small:
-        return []  # the defaults are the paper's: UNet (512,1024,2048), DDPM 100 steps, lr 1e-4, 500 warm-up
-    same = "; the same for OmniD and DP"
-    return [
-        (
-            "--policy.down_dims=[128,256,512]",
-            "a UNet with 1/16 of the default's weights, for 2 CPU cores" + same,
-        ),
-        (
-            "--policy.noise_scheduler_type=DDIM",
-            "sampling in 10 DDIM steps instead of 100 DDPM steps: 10x "
-            "cheaper evaluation, same training objective" + same,
-        ),
-        ("--policy.num_inference_steps=10", "see DDIM"),
-        (
-            "--policy.prediction_type=sample",
-            "short run: the head regresses the clean action chunk instead of the noise. Measured: DP "
-            "fitting one expert episode in 400 steps reached 0.8 cm open-loop error with sample, 17 cm "
-            "with epsilon (holding the pose: 2 cm); epsilon needs far more steps than a CPU run has" + same,
-        ),
-        ("--policy.optimizer_lr=3e-4", "short run: 3x the default learning rate" + same),
-        ("--policy.scheduler_warmup_steps=50", "short run: 50 warm-up steps instead of 500" + same),
-    ]
-
-
-def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
-    """Options of ``method`` trained from scratch on the B-E set, beyond type, device and push_to_hub."""
-    if method == "omnid":
-        shape = "[16,20,8]" if p.small else "[32,40,16]"
-        side = p.image_size // 16
-        flags = [
-            ("--policy.cameras=" + json_list(TRAIN_CAMERAS), "cameras B-E, the protocol's training views"),
-            (
-                f"--policy.volume_bounds={SIM_VOLUME_BOUNDS}",
-                "the benchmark's workspace (objects lie in x "
-                "0.3-0.8 m, y -0.3-0.35 m) instead of the paper robot's",
-            ),
-            (
-                f"--policy.volume_shape={shape}",
-                "4 cm cells, CPU size"
-                if p.small
-                else "2 cm cells over the benchmark's smaller workspace (paper: 64x16x64 over its own)",
-            ),
-            ("--policy.backbone_layer=3", f"stride-16 features ({side}x{side} maps at {p.image_size} px)"),
-        ]
-        if p.small:
-            flags += [
-                ("--policy.d_model=64", "CPU size: OFG width 64 (paper 128)"),
-                ("--policy.num_layers=2", "CPU size: 2 OFG layers (paper 6)"),
-                ("--policy.checkpoint_sampling=false", "memory is no concern at this size: no recomputation"),
-                (
-                    "--policy.plane_readout=keypoints",
-                    "short run: the plane is read out as 16 soft-argmax keypoints in the base frame instead "
-                    "of flattened (the paper's), selected on validation seeds among five readouts "
-                    "(lerobot_omnid/benchmark/readout_selection.py; numbers in docs/results.md)",
-                ),
-                ("--policy.compressed_channels=16", "see plane_readout: 16 keypoints"),
-            ]
-        if p.fuse_last_step_only:
-            flags.append(
-                (
-                    "--policy.fuse_last_step_only=true",
-                    "backbone and OFG on the last observation step only, as the authors' code (the state "
-                    "keeps both): cheaper steps, supported by the validation protocol (docs/benchmark.md)",
-                )
-            )
-        return flags + diffusion_head_flags(p)
-    if method == "diffusion":
-        return [
-            ("--policy.pretrained_backbone_weights=null", NO_DOWNLOAD),
-            ("--policy.use_group_norm=true", GROUP_NORM),
-            ("--policy.crop_shape=null", NO_CROP),
-            (
-                "--policy.use_separate_rgb_encoder_per_camera=false",
-                "one ResNet-18 shared by the cameras, as in "
-                "OmniD (one per camera: 4x the backbone weights and compute)",
-            ),
-            (
-                "--policy.horizon=16",
-                "OmniD's (the paper's) action timing: 2 observations, 16 predicted "
-                "actions, 8 executed (LeRobot's DP default: 64 predicted, 32 executed)",
-            ),
-            ("--policy.n_action_steps=8", "see horizon"),
-            ("--policy.drop_n_last_frames=7", "horizon - n_action_steps - n_obs_steps + 1, as OmniD"),
-            *diffusion_head_flags(p),
-        ]
-    if method == "act":
-        return [
-            ("--policy.pretrained_backbone_weights=null", NO_DOWNLOAD),
-            (
-                "--policy.chunk_size=16",
-                "the same 16 predicted actions as OmniD/DP (default 100: 10 s at "
-                "10 Hz, longer than an expert episode)",
-            ),
-            ("--policy.n_action_steps=8", "8 actions executed per prediction, as OmniD/DP"),
-        ]
-    if method == "vqbet":
-        flags = [
-            ("--policy.pretrained_backbone_weights=null", NO_DOWNLOAD),
-            ("--policy.use_group_norm=true", GROUP_NORM),
-            ("--policy.crop_shape=null", NO_CROP + " (VQ-BeT's default: random 84x84 crops)"),
-            (
-                "--policy.input_features=" + input_features(VQBET_CAMERA, p.image_size),
-                "LeRobot's VQ-BeT takes exactly one image: camera B (the front view) of the four",
-            ),
-            ("--policy.n_obs_steps=2", "2 observations, as OmniD/DP (default 5)"),
-            ("--policy.action_chunk_size=8", "8 actions executed per prediction, as OmniD/DP (default 5)"),
-            (
-                f"--policy.n_vqvae_training_steps={max(p.steps // 5, 1)}",
-                "the action tokeniser (VQ-VAE) "
-                "trains in the first 20% of the steps, the GPT after it (default 20000 = 20% of 100k)",
-            ),
-        ]
-        if p.small:
-            flags.append(("--policy.scheduler_warmup_steps=50", "short run: 50 warm-up steps, as OmniD/DP"))
-        return flags
-    raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
-
-
-def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
-    """Options that turn a B-E checkpoint (given with ``--policy.path``) into a camera-A policy."""
-    if method == "omnid":
-        why = "camera A only: its calibration comes from the dataset, every weight from the checkpoint"
-        return [("--policy.cameras=" + json_list(CAMERA_A), why)]
-    if method in ("diffusion", "act", "vqbet"):
-        why = (
-            "a copy of the task-0 checkpoint whose image input is camera A instead of the training "
-            "camera(s) (lerobot_omnid.benchmark.checkpoint_cameras: a --policy.input_features override "
-            "is merged with the checkpoint's, it cannot drop them); "
-        )
-        why += (
-            "DP conditions on each camera's features side by side: the copy's FiLM layers get the sum of "
-            "the four cameras' weights, so it starts as the B-E model given camera A's image in every slot"
-            if method == "diffusion"
-            else "the weights do not depend on the camera"
-        )
-        flags = [("--policy.path=<copy with camera A>", why)]
-        if method == "vqbet":
-            why = "the checkpoint's action tokeniser is kept; the GPT gets the usual warm-up and schedule"
-            flags.append(("--policy.n_vqvae_training_steps=0", why))
-        return flags
-    raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
-
-
-def ablation_flags(name: str, p: BenchmarkProfile) -> list[Flag]:
-    base = method_flags("omnid", p)
-    if name == "omnid_resnet101":
-        return [*base, ("--policy.vision_backbone=resnet101", "ablation: deeper backbone")]
-    if name == "omnid_no_ofg":
-        return [*base, ("--policy.use_ofg=false", "ablation: per-camera keypoint features, no OFG")]
-    if name == "omnid_cam_a":
-        return [(f, r) for f, r in base if not f.startswith("--policy.cameras=")] + [
-            (
-                "--policy.cameras=" + json_list(CAMERA_A),
-                f"ablation: one view, camera A ({p.episodes} episodes)",
-            )
-        ]
-    raise ValueError(f"ablation: expected one of {list(ABLATIONS)}, got {name!r}")
-
-
 def heldout_dataset(task: str, setting: str) -> str:
     """Name of the held-out expert recording (cameras B-E) of ``task`` in ``setting``."""
     return f"{task}_bcde_heldout_{setting}"
@@ -343,36 +154,6 @@ def setting_env(setting: str) -> tuple[str, str]:
         f"setting: expected id, {FEWSHOT}, position_ood or one of {[*BACKGROUND_OODS, *BANDS]}, "
         f"got {setting!r}"
     )
-
-
-def method_controls(method: str) -> tuple[str, ...]:
-    """The controls of ``method``: every method's blind one, and OmniD's scrambled and perturbed geometry."""
-    return CONTROLS if method == "omnid" else ("blind",)
-
-
-def control_flags(
-    method: str, control: str, cameras: Sequence[str], calibration_file: Path | str
-) -> list[Flag]:
-    """Options that turn an evaluation of ``method``'s checkpoint into its ``control``: only the state can
-    drive it (blind), or its images are lifted with the wrong geometry (scrambled) or a slightly wrong one
-    (perturbed; both OmniD only)."""
-    if control not in method_controls(method):
-        raise ValueError(
-            f"control of {method}: expected one of {list(method_controls(method))}, got {control!r}"
-        )
-    if method == "omnid":
-        why = {
-            "blind": "every camera turned away from the volume in its calibration (lerobot_omnid."
-            "benchmark.control_calibration): no anchor is visible, the images contribute nothing",
-            "scrambled": "the cameras' calibrations permuted (each gets the next camera's, none keeps "
-            "its own): real images lifted into the volume with the wrong geometry",
-            "perturbed": f"every camera moved by {PERTURBED_LEVEL:g} cm and turned by {PERTURBED_LEVEL:g} "
-            "degrees in its calibration (random directions, fixed seed): how much a measured rig's error "
-            "costs",
-        }[control]
-        return [(f"--policy.calibration_path={calibration_file}", why)]
-    why = "black images (every pixel zero) from every camera: only the state can drive the policy"
-    return [(f"--env.blackout_cameras=[{','.join(cameras)}]", why)]
 
 
 def control_setting(setting: str, control: str, control_settings: Sequence[str]) -> str | None:

@@ -35,6 +35,7 @@ from pathlib import Path
 from gym_omnid import TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.methods import control_flags, method_flags
 from lerobot_omnid.benchmark.plan import (
     BACKGROUND_OODS,
     BANDS,
@@ -43,8 +44,6 @@ from lerobot_omnid.benchmark.plan import (
     PROFILES,
     TASK0,
     TRAIN_SEED,
-    control_flags,
-    method_flags,
     setting_env,
 )
 from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan

@@ -32,7 +32,8 @@ from pathlib import Path
 from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
 
 from lerobot_omnid.benchmark import commands
-from lerobot_omnid.benchmark.plan import BANDS, PROFILES, TRAIN_SEED, method_flags
+from lerobot_omnid.benchmark.methods import method_flags
+from lerobot_omnid.benchmark.plan import BANDS, PROFILES, TRAIN_SEED
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,

@@ -30,7 +30,8 @@ import torch
 from gym_omnid.constants import CAMERAS
 
 from lerobot_omnid.benchmark.commands import eval_command, json_list
-from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, control_flags
+from lerobot_omnid.benchmark.methods import control_flags
+from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.geometry import axis_angle_to_matrix, perturb_extrinsics, random_unit_vectors
 from lerobot_omnid.keys import image_key

@@ -217,7 +217,7 @@ def controls_table(
     labels: Mapping[str, str],
     control_labels: Mapping[str, str],
 ) -> list[str]:
-    """Each method against its own controls (the same checkpoint, see ``plan.control_flags``) on ``task``:
+    """Each method against its own controls (the same checkpoint, see ``methods.control_flags``) on ``task``:
     the margin of the checkpoint as trained over the control with Newcombe's interval, and the two-sided
     Fisher p-value. ``control_of[(setting, control)]`` is the setting whose control evaluation controls
     ``setting`` (the blind control of a background OOD is the ID one's)."""

@@ -14,7 +14,8 @@ import pytest
 from omnid_testing import by_name, flag
 
 import lerobot_omnid.benchmark.benchmark as bench
-from lerobot_omnid.benchmark.plan import ABLATIONS, PROFILES, TASK0, TASK1, TRAIN_SEED, build_plan
+from lerobot_omnid.benchmark.methods import ABLATIONS
+from lerobot_omnid.benchmark.plan import PROFILES, TASK0, TASK1, TRAIN_SEED, build_plan
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import CHECKPOINT
 

@@ -13,11 +13,11 @@ import gym_omnid.constants
 import pytest
 from omnid_testing import by_name, flag
 
+from lerobot_omnid.benchmark.methods import METHODS
 from lerobot_omnid.benchmark.plan import (
     BANDS,
     FEWSHOT_SEED,
     HELDOUT_SEED,
-    METHODS,
     PROFILES,
     SETTINGS,
     TASK0,

@@ -18,7 +18,7 @@ from lerobot_omnid.benchmark.control_calibration import (
     permuted,
     turned_away,
 )
-from lerobot_omnid.benchmark.plan import PERTURBED_LEVEL
+from lerobot_omnid.benchmark.methods import PERTURBED_LEVEL
 from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.env_config import OmniDEnvConfig

@@ -7,7 +7,8 @@ import pytest
 from gym_omnid import TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark.demo import PROFILES, blind_margin, main, train_command, write_report
-from lerobot_omnid.benchmark.plan import MINI, method_flags
+from lerobot_omnid.benchmark.methods import method_flags
+from lerobot_omnid.benchmark.plan import MINI
 
 
 def summary(id_counts: tuple[int, int], blind_counts: tuple[int, int]) -> dict:

@@ -10,17 +10,9 @@ from pathlib import Path
 import pytest
 
 import lerobot_omnid.benchmark.benchmark as bench
+from lerobot_omnid.benchmark.methods import CONTROL_LABELS, CONTROLS
 from lerobot_omnid.benchmark.outputs import BANDS_CM
-from lerobot_omnid.benchmark.plan import (
-    BANDS,
-    CONTROL_LABELS,
-    CONTROLS,
-    SETTINGS,
-    TASK0,
-    TASK1,
-    TRAIN_SEED,
-    control_setting,
-)
+from lerobot_omnid.benchmark.plan import BANDS, SETTINGS, TASK0, TASK1, TRAIN_SEED, control_setting
 from lerobot_omnid.measure.charts import bar_chart, position_curve_chart
 from lerobot_omnid.measure.report import (
     ablation_table,
