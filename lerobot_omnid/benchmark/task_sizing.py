@@ -1,0 +1,234 @@
+"""Sizing every task for a CPU on validation: how long LeRobot's DP must train before it does the task at all.
+
+The protocol (docs/benchmark.md#sizing-the-six-tasks), fixed before any of its runs:
+
+1. *Data*: per task, the benchmark's ``mini`` training set (50 expert episodes from env seed 0, cameras
+   B-E, 64 px), recorded by the same command as ``omnid-benchmark``'s, in the same folder, so that the
+   six-task benchmark run with this ``--out`` reuses it.
+2. *Candidate*: LeRobot's ``diffusion`` with the benchmark's options (``methods.method_flags``), the
+   strongest stock baseline here, trained with ``lerobot-train --seed=1000`` for ``BUDGETS[0]`` steps
+   (this run is the benchmark's own ``train/diffusion/<task>``); a task below the threshold is trained
+   again for ``BUDGETS[1]`` steps, and so on, never beyond the last budget.
+3. *Validation*, never reported as a result: ``lerobot-eval`` in the ID setting on env seeds
+   ``VALIDATION_SEED`` ... (``VALIDATION_EPISODES`` episodes), disjoint from the training (0 ...), test
+   (1000k), few-shot (100000), held-out (200000), readout-validation (50000, 300000) and probe (400000)
+   seeds.
+4. *Rule* (:func:`size`): a task's budget is the first whose validation success reaches ``THRESHOLD``; a
+   task below it at every budget is "not learned within the last budget" and stays in the table as
+   measured. The budgets are written to ``sizing.json``; the six-task benchmark trains every method for
+   its task's budget.
+
+Runs on the experiment engine (resumable; ``--dry-run`` prints every command; the next budget of a task is
+planned once its validation is done); writes ``<out>/report.md`` and ``<out>/summary.json``, and
+``--report-only --summary FILE`` rebuilds the report from such a summary alone.
+
+    MUJOCO_GL=egl python -m lerobot_omnid.benchmark.task_sizing --out outputs/six_tasks
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+from gym_omnid import TASKS, TRAIN_CAMERAS
+
+from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.methods import method_flags
+from lerobot_omnid.benchmark.plan import PROFILES, TRAIN_SEED
+from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
+from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.stats import wilson_interval
+
+PROFILE = PROFILES["mini"]
+METHOD = "diffusion"
+BUDGETS = (1000, 3000)  # training steps tried in turn; the first is mini's (its runs are the benchmark's)
+VALIDATION_SEED = 60_000
+VALIDATION_EPISODES = 20
+THRESHOLD = 6  # validation successes of VALIDATION_EPISODES (30 %): the task is being done, not stumbled on
+SIZING_FILE = "sizing.json"
+
+
+def train_dir(out: Path, task: str, steps: int) -> Path:
+    """The benchmark's own folder for the first budget, ``train_steps<n>/`` for the others."""
+    folder = "train" if steps == PROFILE.steps else f"train_steps{steps}"
+    return out / folder / METHOD / task
+
+
+def validation_dir(out: Path, task: str, steps: int) -> Path:
+    return out / "validation" / METHOD / task / f"steps{steps}"
+
+
+def task_runs(out: Path, task: str, budgets: Sequence[int]) -> list[Run]:
+    """Record ``task``'s training set; per budget, train and validate."""
+    data = out / "data" / f"{task}_bcde"
+    record = commands.record_command(task, PROFILE.episodes, TRAIN_CAMERAS, PROFILE.image_size, data, seed=0)
+    runs = [Run(f"record/{data.name}", "record", tuple(record), data, episodes=PROFILE.episodes)]
+    flags = [f"--policy.type={METHOD}", f"--policy.device={PROFILE.device}", "--policy.push_to_hub=false"]
+    flags += [flag for flag, _ in method_flags(METHOD, PROFILE)]
+    for steps in budgets:
+        trained = train_dir(out, task, steps)
+        name = f"{trained.relative_to(out)}"
+        cmd = commands.train_command(
+            data, trained, flags, steps, PROFILE.batch_size, PROFILE.num_workers, seed=TRAIN_SEED
+        )
+        runs.append(Run(name, "train", tuple(cmd), trained, (runs[0].name,), train_seed=TRAIN_SEED))
+        output = validation_dir(out, task, steps)
+        cmd = commands.eval_command(
+            trained / CHECKPOINT,
+            output,
+            task,
+            "id",
+            TRAIN_CAMERAS,
+            PROFILE.image_size,
+            VALIDATION_EPISODES,
+            PROFILE.device,
+            seed=VALIDATION_SEED,
+            extra=(f"--env.episode_length={PROFILE.episode_length}",),
+            batch_size=min(PROFILE.eval_batch_size, VALIDATION_EPISODES),
+        )
+        runs.append(Run(f"{output.relative_to(out)}", "eval", tuple(cmd), output, (name,)))
+    return runs
+
+
+def size(counts: dict[int, tuple[int, int]]) -> int | str | None:
+    """The rule: the first budget (in ``BUDGETS`` order) whose validation successes reach ``THRESHOLD``;
+    None when every budget is measured and none does; "pending" while a needed budget is unmeasured."""
+    for steps in BUDGETS:
+        if steps not in counts:
+            return "pending"
+        if counts[steps][0] >= THRESHOLD:
+            return steps
+    return None
+
+
+def protocol(out: Path, tasks: Sequence[str]) -> list[Run]:
+    """Every task's runs up to the budget the validation so far calls for: a budget is planned when the
+    previous one is validated and below the threshold."""
+    runs: list[Run] = []
+    for task in tasks:
+        budgets = [BUDGETS[0]]
+        while True:
+            planned = plan(task_runs(out, task, budgets), out)
+            last = next(r for r in planned if r.output == validation_dir(out, task, budgets[-1]))
+            if not is_done(last) or len(budgets) == len(BUDGETS):
+                break
+            if read_eval_info(last.output / "eval_info.json")[0] >= THRESHOLD:
+                break
+            budgets.append(BUDGETS[len(budgets)])
+        runs += task_runs(out, task, budgets)
+    return plan(runs, out)
+
+
+def summarise(out: Path, runs: Sequence[Run], tasks: Sequence[str]) -> dict:
+    """Per task the validation counts of every budget done for this plan, and the rule's budget."""
+    done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
+    results = {}
+    for task in tasks:
+        counts = {
+            steps: read_eval_info(validation_dir(out, task, steps) / "eval_info.json")
+            for steps in BUDGETS
+            if validation_dir(out, task, steps) in done
+        }
+        results[task] = {
+            "validation": {str(steps): list(c) for steps, c in counts.items()},
+            "budget": size(counts),
+        }
+    return {
+        "method": METHOD,
+        "budgets": list(BUDGETS),
+        "threshold": THRESHOLD,
+        "validation_seed": VALIDATION_SEED,
+        "validation_episodes": VALIDATION_EPISODES,
+        "train_seed": TRAIN_SEED,
+        "tasks": results,
+    }
+
+
+def write_report(summary: dict, path: Path) -> None:
+    """``report.md``: per task the validation success at each budget and the budget the rule gives."""
+    budgets = summary["budgets"]
+    first = summary["validation_seed"]
+    lines = [
+        "# Sizing the tasks: DP's validation success per training budget (mini data)",
+        "",
+        f"`{summary['method']}`, `lerobot-train --seed={summary['train_seed']}`; ID on env seeds {first}-"
+        f"{first + summary['validation_episodes'] - 1}; rule: the first budget with at least "
+        f"{summary['threshold']}/{summary['validation_episodes']} successes.",
+        "",
+        "| task | " + " | ".join(f"{b} steps (Wilson 95 %)" for b in budgets) + " | budget |",
+        "|---|" + "---|" * (len(budgets) + 1),
+    ]
+    for task, result in summary["tasks"].items():
+        cells = []
+        for b in budgets:
+            counts = result["validation"].get(str(b))
+            if counts is None:
+                cells.append("-")
+                continue
+            est = wilson_interval(*counts)
+            cells.append(f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)")
+        budget = result["budget"]
+        chosen = f"not learned within {budgets[-1]} steps" if budget is None else str(budget)
+        lines.append(f"| {task} | " + " | ".join(cells) + f" | {chosen} |")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, default=Path("outputs/six_tasks"))
+    parser.add_argument(
+        "--tasks", default=",".join(TASKS), help=f"comma-separated subset of {','.join(TASKS)} (default all)"
+    )
+    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
+    parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
+    parser.add_argument(
+        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
+    )
+    args = parser.parse_args(argv)
+    out = args.out.resolve()
+    if args.summary:
+        if not args.report_only:
+            parser.error("--summary: expected with --report-only, got it without")
+        write_report(json.loads(args.summary.read_text()), out / "report.md")
+        return 0
+    tasks = [t for t in args.tasks.split(",") if t]
+    if unknown := [t for t in tasks if t not in TASKS]:
+        parser.error(f"--tasks: expected names from {','.join(TASKS)}, got {','.join(unknown)}")
+    runs = protocol(out, tasks)
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return 0
+    if not args.report_only:
+        # Each pass runs what the validation so far calls for (a task below the threshold gets its next
+        # budget in the next pass); the summary is rewritten after every finished run.
+        while any(not is_done(r) for r in runs):
+            execute(
+                runs,
+                out,
+                commit=code_commit(),
+                desc="task sizing",
+                on_done=lambda _, runs=runs: write_outputs(out, runs, tasks),
+                stop_on_failure=True,
+            )
+            runs = protocol(out, tasks)
+    write_outputs(out, runs, tasks)
+    return 0
+
+
+def write_outputs(out: Path, runs: Sequence[Run], tasks: Sequence[str]) -> None:
+    """``summary.json``, ``sizing.json`` (each task's budget) and ``report.md`` from the runs done."""
+    summary = summarise(out, runs, tasks)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    budgets = {task: result["budget"] for task, result in summary["tasks"].items()}
+    (out / SIZING_FILE).write_text(json.dumps(budgets, indent=2) + "\n")
+    write_report(summary, out / "report.md")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
