@@ -33,6 +33,7 @@ OFG_ONLY_OPTIONS = {
     "calibration_noise_focal_pct": 0.0,
     "calibration_noise_principal_px": 0.0,
     "camera_dropout": 0.0,
+    "single_camera_rate": 0.0,
 }
 """Training augmentations that act in the OFG's path, each with the value that turns it off."""
 
@@ -114,13 +115,16 @@ class OmniDConfig(PreTrainedConfig):
         camera_dropout: Training-time probability of dropping each camera of a sample (its samples are
             masked out of the attention; at least one camera is always kept), so the fusion learns to work
             with whatever cameras are there. 0: off.
+        single_camera_rate: Training-time share of samples that keep exactly one camera, drawn uniformly
+            (after ``camera_dropout``): the OFG must then lift the scene from a single view, as it must for
+            a new camera seen alone. 0: off; 1: every sample one camera.
         fuse_last_step_only: Only the last observation step's images go through the backbone and the OFG
             (as in the authors' code); the state still conditions with all ``n_obs_steps``. Encoding
             costs 1 / n_obs_steps as much; what the head loses is the image history.
         use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
             concatenated in camera order instead of the 3D feature (then the cameras are fixed). The
             augmentations of the OFG's path (``random_crop_min_scale``, ``calibration_noise_*``,
-            ``camera_dropout``) would do nothing there and must then be off.
+            ``camera_dropout``, ``single_camera_rate``) would do nothing there and must then be off.
         volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
             base frame, metres.
         volume_shape: Cells along (x, y, z).
@@ -197,6 +201,7 @@ class OmniDConfig(PreTrainedConfig):
     calibration_noise_focal_pct: float = 0.0
     calibration_noise_principal_px: float = 0.0
     camera_dropout: float = 0.0
+    single_camera_rate: float = 0.0
     fuse_last_step_only: bool = False
 
     # Omni-Feature Generator.
@@ -316,6 +321,10 @@ class OmniDConfig(PreTrainedConfig):
                 raise ValueError(f"`{name}`: expected a standard deviation >= 0, got {getattr(self, name)}")
         if not 0 <= self.camera_dropout < 1:
             raise ValueError(f"`camera_dropout`: expected a probability in [0, 1), got {self.camera_dropout}")
+        if not 0 <= self.single_camera_rate <= 1:
+            raise ValueError(
+                f"`single_camera_rate`: expected a share in [0, 1], got {self.single_camera_rate}"
+            )
         if not self.use_ofg:
             for name, off in OFG_ONLY_OPTIONS.items():
                 if getattr(self, name) != off:

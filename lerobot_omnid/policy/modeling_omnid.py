@@ -51,11 +51,15 @@ FRAME_MATRICES = ("omnid.pix_T_cam", "omnid.cam_T_world")
 for the backbone's input size, static and per-frame calibration alike."""
 
 
-def camera_dropout_mask(batch_size: int, num_cameras: int, p: float, device: torch.device) -> Tensor:
-    """(B, S) bool: each camera kept with probability 1 - p, and at least one (a random one) per sample."""
+def camera_dropout_mask(
+    batch_size: int, num_cameras: int, p: float, device: torch.device, single_rate: float = 0.0
+) -> Tensor:
+    """(B, S) bool: each camera kept with probability 1 - p, and at least one (a random one) per sample;
+    a share ``single_rate`` of the samples then keeps exactly that one camera."""
     keep = torch.rand(batch_size, num_cameras, device=device) >= p
-    one = F.one_hot(torch.randint(num_cameras, (batch_size,), device=device), num_cameras)
-    return keep | one.bool()
+    one = F.one_hot(torch.randint(num_cameras, (batch_size,), device=device), num_cameras).bool()
+    single = torch.rand(batch_size, 1, device=device) < single_rate
+    return torch.where(single, one, keep | one)
 
 
 def resize_images(images: Tensor, image_hw: tuple[int, int]) -> Tensor:
@@ -322,9 +326,11 @@ class OmniDPolicy(PreTrainedPolicy):
             if self.config.random_crop_min_scale < 1:
                 images, pix_T_cam = self._random_crop(images, pix_T_cam)
             pix_T_cam, cam_T_world = self._calibration_noise(pix_T_cam.float(), cam_T_world.float())
-        if self.config.camera_dropout > 0:
+        if self.config.camera_dropout > 0 or self.config.single_camera_rate > 0:
             B, S = images.shape[0], images.shape[2]  # images: B, T, S, 3, H, W
-            camera_mask = camera_dropout_mask(B, S, self.config.camera_dropout, images.device)
+            camera_mask = camera_dropout_mask(
+                B, S, self.config.camera_dropout, images.device, self.config.single_camera_rate
+            )
         return images, pix_T_cam, cam_T_world, camera_mask
 
     def _calibration_noise(self, pix_T_cam: Tensor, cam_T_world: Tensor) -> tuple[Tensor, Tensor]:

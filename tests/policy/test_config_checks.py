@@ -26,6 +26,7 @@ OFG_AUGMENTATIONS = {  # each set to a value that is on
     "calibration_noise_focal_pct": 2.0,
     "calibration_noise_principal_px": 1.0,
     "camera_dropout": 0.5,
+    "single_camera_rate": 0.5,
 }
 
 

@@ -95,6 +95,39 @@ def test_camera_dropout_keeps_one_camera_and_training_stays_finite():
     loss.backward()
 
 
+def test_single_camera_rate_keeps_exactly_one_camera_drawn_uniformly():
+    cpu = torch.device("cpu")
+    torch.manual_seed(0)
+    every = camera_dropout_mask(4000, 4, 0.0, cpu, single_rate=1.0)
+    assert (every.sum(dim=1) == 1).all()
+    share = every.float().mean(dim=0)  # each camera the one kept about a quarter of the time
+    assert ((share - 0.25).abs() < 0.03).all(), share
+    half = camera_dropout_mask(4000, 4, 0.0, cpu, single_rate=0.5).sum(dim=1)
+    assert abs((half == 1).float().mean() - 0.5) < 0.03 and set(half.tolist()) == {1, 4}
+    assert not camera_dropout_mask(10, 4, 0.0, cpu, single_rate=0.0).logical_not().any()
+
+
+def test_single_camera_training_lifts_from_the_kept_camera_alone(monkeypatch, tmp_path):
+    """With every sample on one camera, the plane the head gets is that camera's plane alone; the option
+    survives save and load like every other field."""
+    policy = OmniDPolicy(tiny_config(single_camera_rate=1.0)).train()
+    masks = []
+    original = policy.model.global_condition
+
+    def spy(*args, **kwargs):
+        masks.append(args[4] if len(args) > 4 else kwargs.get("camera_mask"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(policy.model, "global_condition", spy)
+    loss, _ = policy.forward(random_batch(policy.config))
+    assert torch.isfinite(loss)
+    assert masks and (masks[0].sum(dim=1) == 1).all()
+    policy.save_pretrained(tmp_path)
+    assert OmniDPolicy.from_pretrained(tmp_path).config.single_camera_rate == 1.0
+    with pytest.raises(ValueError, match=r"`single_camera_rate`: expected a share in \[0, 1\], got 1.5"):
+        tiny_config(single_camera_rate=1.5)
+
+
 def check_dropped_cameras_are_left_out_of_the_plane(policy: OmniDPolicy) -> None:
     """Two samples with different cameras dropped (B in sample 0, D in sample 1): each sample's plane must
     be the plane of its kept cameras alone, the attention renormalised over them."""
