@@ -46,6 +46,7 @@ from lerobot_omnid.benchmark.plan import (
     TRAIN_SEED,
     setting_env,
 )
+from lerobot_omnid.cli import add_protocol_options, report_from_summary
 from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
@@ -337,17 +338,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--test", action="store_true", help="evaluate the selected readout and flatten on the test seeds"
     )
-    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
-    parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
-    parser.add_argument(
-        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
-    )
+    add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if args.summary:
-        if not args.report_only:
-            parser.error("--summary: expected with --report-only, got it without")
-        write_report(json.loads(args.summary.read_text()), out / "report.md")
+    if report_from_summary(parser, args, out, write_report):
         return
     data = args.data.resolve() if args.data else out / "data" / TRAIN_DATA
     if args.data and (found := commands.recorded_episodes(data)) != PROFILE.episodes:

@@ -34,6 +34,7 @@ from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import method_flags
 from lerobot_omnid.benchmark.plan import BANDS, PROFILES, TRAIN_SEED
+from lerobot_omnid.cli import add_protocol_options, report_from_summary
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
@@ -248,17 +249,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=Path("outputs/rigs_and_wrist"))
     parser.add_argument("--one-rig-checkpoint", type=Path, help="a mini OmniD pretrained_model folder")
     parser.add_argument("--eval-episodes", type=int, default=30, help="episodes per cell (default 30)")
-    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
-    parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
-    parser.add_argument(
-        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
-    )
+    add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if args.summary:
-        if not args.report_only:
-            parser.error("--summary: expected with --report-only, got it without")
-        write_report(json.loads(args.summary.read_text()), out / "report.md")
+    if report_from_summary(parser, args, out, write_report):
         return
     given = {"one_rig": args.one_rig_checkpoint.resolve()} if args.one_rig_checkpoint else {}
     for path in given.values():

@@ -37,6 +37,7 @@ from gym_omnid import TASKS, TRAIN_CAMERAS
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import method_flags
 from lerobot_omnid.benchmark.plan import PROFILES, TRAIN_SEED
+from lerobot_omnid.cli import add_protocol_options, report_from_summary
 from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import wilson_interval
@@ -185,17 +186,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--tasks", default=",".join(TASKS), help=f"comma-separated subset of {','.join(TASKS)} (default all)"
     )
-    parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
-    parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
-    parser.add_argument(
-        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
-    )
+    add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if args.summary:
-        if not args.report_only:
-            parser.error("--summary: expected with --report-only, got it without")
-        write_report(json.loads(args.summary.read_text()), out / "report.md")
+    if report_from_summary(parser, args, out, write_report):
         return 0
     tasks = [t for t in args.tasks.split(",") if t]
     if unknown := [t for t in tasks if t not in TASKS]:
