@@ -17,6 +17,7 @@ Example::
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,16 +58,17 @@ ENV_PACKAGE = "gym_omnid"
 """Python package that registers the gym ids ``gym_omnid/<task>``."""
 
 
-def validate_cameras(field_name: str, cameras: Any) -> list[str]:
-    """Check a camera list: non-empty, known names, no duplicates. Returns it as a list."""
+def validate_cameras(field_name: str, cameras: Any, allowed: Sequence[str] = ALL_CAMERAS) -> list[str]:
+    """Check a camera list: non-empty, names from ``allowed`` (default: gym_omnid's), no duplicates.
+    Returns it as a list."""
     if isinstance(cameras, str) or not isinstance(cameras, list | tuple) or not cameras:
         raise ValueError(
-            f"{field_name}: expected a non-empty list of cameras from {list(ALL_CAMERAS)}, got {cameras!r}"
+            f"{field_name}: expected a non-empty list of cameras from {list(allowed)}, got {cameras!r}"
         )
-    unknown = [c for c in cameras if c not in ALL_CAMERAS]
+    unknown = [c for c in cameras if c not in allowed]
     if unknown:
         raise ValueError(
-            f"{field_name}: unknown camera(s) {unknown}; expected names from {list(ALL_CAMERAS)}, "
+            f"{field_name}: unknown camera(s) {unknown}; expected names from {list(allowed)}, "
             f"got {list(cameras)}"
         )
     if len(set(cameras)) != len(cameras):
@@ -96,6 +98,31 @@ def validate_image_size(field_name: str, image_size: Any) -> int:
             f"{field_name}: expected an int number of pixels in [1, {MAX_IMAGE_SIDE}], got {image_size!r}"
         )
     return image_size
+
+
+def env_policy_features(
+    cameras: Sequence[str], image_size: int, state_dim: int, action_dim: int, per_frame_calibration: bool
+) -> tuple[dict[str, PolicyFeature], dict[str, str]]:
+    """``(features, features_map)`` of an env config whose env observes ``pixels/<cam>`` images of
+    ``image_size``, ``agent_pos`` and, with ``per_frame_calibration``, each camera's calibration entries."""
+    features = {
+        ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(action_dim,)),
+        "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(state_dim,)),
+    }
+    features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
+    for cam in cameras:
+        features[f"pixels/{cam}"] = PolicyFeature(type=FeatureType.VISUAL, shape=(image_size, image_size, 3))
+        features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
+    if per_frame_calibration:
+        # STATE, as LeRobot's dataset_to_policy_features types these columns of a dataset.
+        for cam in cameras:
+            for prefix, key, names in (
+                (EXTRINSICS_OBS_PREFIX, extrinsics_key(cam), EXTRINSICS_NAMES),
+                (INTRINSICS_OBS_PREFIX, intrinsics_key(cam), INTRINSICS_NAMES),
+            ):
+                features[prefix + cam] = PolicyFeature(type=FeatureType.STATE, shape=(len(names),))
+                features_map[prefix + cam] = key
+    return features, features_map
 
 
 @EnvConfig.register_subclass("omnid")
@@ -189,25 +216,9 @@ class OmniDEnvConfig(EnvConfig):
         check_choice("render_mode", self.render_mode, ("rgb_array",))
 
         # Derived from the fields above (a config loaded from JSON carries stale copies: rebuild).
-        self.features = {
-            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(ACTION_DIM,)),
-            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(STATE_DIM,)),
-        }
-        self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
-        for cam in self.cameras:
-            self.features[f"pixels/{cam}"] = PolicyFeature(
-                type=FeatureType.VISUAL, shape=(self.image_size, self.image_size, 3)
-            )
-            self.features_map[f"pixels/{cam}"] = f"{OBS_IMAGES}.{cam}"
-        if self.per_frame_calibration:
-            # STATE, as LeRobot's dataset_to_policy_features types these columns of a dataset.
-            for cam in self.cameras:
-                for prefix, key, names in (
-                    (EXTRINSICS_OBS_PREFIX, extrinsics_key(cam), EXTRINSICS_NAMES),
-                    (INTRINSICS_OBS_PREFIX, intrinsics_key(cam), INTRINSICS_NAMES),
-                ):
-                    self.features[prefix + cam] = PolicyFeature(type=FeatureType.STATE, shape=(len(names),))
-                    self.features_map[prefix + cam] = key
+        self.features, self.features_map = env_policy_features(
+            self.cameras, self.image_size, STATE_DIM, ACTION_DIM, self.per_frame_calibration
+        )
 
     @property
     def package_name(self) -> str:

@@ -22,6 +22,13 @@ Example::
 
     MUJOCO_GL=egl omnid-record --task select_apple --episodes 50 --root data/omnid_select_apple
 
+``--suite metaworld`` records a MetaWorld v3 task (:mod:`gym_omnid.metaworld_suite`, the optional dependency
+``metaworld``) with MetaWorld's scripted policy as the expert, in the same layout: the cameras ``corner``,
+``corner2``, ``corner3`` and the hand camera ``behindGripper`` (calibrated per frame), MetaWorld's state
+and 4-D action::
+
+    MUJOCO_GL=egl omnid-record --suite metaworld --task assembly-v3 --episodes 50
+
 Ctrl-C stops after discarding the episode in progress and leaves a loadable dataset of the completed
 episodes (press it again to abort at once).
 """
@@ -36,19 +43,21 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gym_omnid import metaworld_suite
 from gym_omnid.calibration import EXTRINSICS_OBS_PREFIX, INTRINSICS_OBS_PREFIX
 from gym_omnid.constants import (
+    ALL_CAMERAS,
     BACKGROUNDS,
     CAMERAS,
     DEFAULT_RIG,
     LAYOUTS,
-    MAX_EPISODE_STEPS,
     MAX_IMAGE_SIDE,
     RIGS,
     TASKS,
@@ -66,9 +75,21 @@ from lerobot_omnid.calibration.frame_columns import (
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
 from lerobot_omnid.cli import check_positive_int, positive_int
 from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras, validate_image_size
+from lerobot_omnid.env_config_metaworld import OmniDMetaWorldEnvConfig
+
+SUITES = ("omnid", "metaworld")
+"""Env suites ``--suite`` records: our benchmark (``gym_omnid``), MetaWorld v3 (``metaworld_suite``)."""
 
 ROBOT_TYPE = "omnid_sim_arm"
-"""``robot_type`` written to the dataset metadata."""
+"""``robot_type`` written to the dataset metadata (the omnid suite)."""
+
+ROBOT_TYPES = {"omnid": ROBOT_TYPE, "metaworld": "metaworld_sawyer"}
+"""``robot_type`` written to the dataset metadata, per suite."""
+
+SUITE_TASKS = {"omnid": TASKS, "metaworld": metaworld_suite.TASKS}
+SUITE_CAMERAS = {"omnid": ALL_CAMERAS, "metaworld": metaworld_suite.ALL_CAMERAS}
+DEFAULT_CAMERAS = {"omnid": CAMERAS, "metaworld": metaworld_suite.DEFAULT_CAMERAS}
+MOVING_CAMERAS = {"omnid": (WRIST_CAMERA,), "metaworld": metaworld_suite.HAND_CAMERAS}
 
 EXIT_INTERRUPTED = 130
 """Exit status after Ctrl-C (128 + SIGINT), as shells report it."""
@@ -148,14 +169,76 @@ class _StopOnSigint:
             signal.signal(signal.SIGINT, self._previous)
 
 
-def check_wrist_calibration(cameras: Sequence[str], per_frame_calibration: bool) -> None:
-    """Refuse the wrist camera with a static calibration: a moving camera has none."""
-    if WRIST_CAMERA in cameras and not per_frame_calibration:
+def check_wrist_calibration(
+    cameras: Sequence[str], per_frame_calibration: bool, suite: str = "omnid"
+) -> None:
+    """Refuse a camera on the arm (gym_omnid's wrist camera, MetaWorld's hand cameras) with a static
+    calibration: a moving camera has none."""
+    moving = [cam for cam in cameras if cam in MOVING_CAMERAS[suite]]
+    if moving and not per_frame_calibration:
         raise ValueError(
-            f"cameras: {WRIST_CAMERA} moves with the arm, so its calibration changes every frame; expected "
-            f"per-frame calibration with it (the default, per_frame_calibration=True), got "
+            f"cameras: {', '.join(moving)} moves with the arm, so its calibration changes every frame; "
+            f"expected per-frame calibration with it (the default, per_frame_calibration=True), got "
             f"--static-calibration (per_frame_calibration=False) with cameras {list(cameras)}"
         )
+
+
+def env_config(
+    suite: str,
+    task: str,
+    cameras: Sequence[str] | None,
+    layout: str,
+    background: str,
+    image_size: int,
+    rig: str,
+    per_frame_calibration: bool,
+    episode_length: int | None,
+) -> OmniDEnvConfig | OmniDMetaWorldEnvConfig:
+    """The env config of a recording (``cameras``/``episode_length`` None: the suite's defaults). MetaWorld
+    has none of the omnid suite's variants: ``layout``, ``background`` and ``rig`` must be the defaults."""
+    if suite not in SUITES:
+        raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
+    cameras = list(DEFAULT_CAMERAS[suite] if cameras is None else cameras)
+    extra = {} if episode_length is None else {"episode_length": episode_length}
+    if suite == "omnid":
+        return OmniDEnvConfig(
+            task=task,
+            cameras=cameras,
+            layout=layout,
+            background=background,
+            image_size=image_size,
+            rig=rig,
+            per_frame_calibration=per_frame_calibration,
+            **extra,
+        )
+    for name, value, default in (
+        ("layout", layout, "id"),
+        ("background", background, "id"),
+        ("rig", rig, DEFAULT_RIG),
+    ):
+        if value != default:
+            raise ValueError(
+                f"{name}: the metaworld suite has no variants; expected {default!r}, got {value!r}"
+            )
+    return OmniDMetaWorldEnvConfig(
+        task=task,
+        cameras=cameras,
+        image_size=image_size,
+        per_frame_calibration=per_frame_calibration,
+        **extra,
+    )
+
+
+def make_expert(suite: str, env: gym.Env) -> Any:
+    """The scripted expert of the episode just reset in ``env``: an object whose ``act()`` gives the next
+    action (gym_omnid's waypoint experts, MetaWorld's scripted policies)."""
+    if suite == "metaworld":
+        from gym_omnid.metaworld_suite.experts import make_expert as make_metaworld_expert
+
+        return make_metaworld_expert(env.unwrapped)
+    from gym_omnid.experts import make_expert as make_omnid_expert
+
+    return make_omnid_expert(env.unwrapped)
 
 
 def dataset_features(
@@ -196,17 +279,16 @@ def _run_expert_episode(
     per_frame_calibration: bool,
     seed: int,
     stop: _StopOnSigint,
+    expert_factory: Callable[[gym.Env], Any],
 ) -> bool | None:
     """Roll out the expert once, adding every frame (with the calibration the env observed it with, when
     ``per_frame_calibration``) to the dataset's episode buffer.
 
     Returns the episode's success, or None when a stop was requested before it ended.
     """
-    from gym_omnid.experts import make_expert
-
     obs, _ = env.reset(seed=seed)
     task = env.unwrapped.task_description
-    expert = make_expert(env.unwrapped)
+    expert = expert_factory(env)
     while True:
         action = np.asarray(expert.act(), dtype=np.float32)
         frame = {OBS_STATE: np.asarray(obs["agent_pos"], dtype=np.float32), ACTION: action, "task": task}
@@ -226,10 +308,11 @@ def _run_expert_episode(
 def record_dataset(
     root: str | Path | None = None,
     *,
+    suite: str = "omnid",
     task: str = "select_apple",
     episodes: int = 50,
     repo_id: str | None = None,
-    cameras: Sequence[str] = CAMERAS,
+    cameras: Sequence[str] | None = None,
     layout: str = "id",
     background: str = "id",
     image_size: int = 128,
@@ -237,7 +320,7 @@ def record_dataset(
     per_frame_calibration: bool = True,
     seed: int = 0,
     max_attempts: int | None = None,
-    episode_length: int = MAX_EPISODE_STEPS,
+    episode_length: int | None = None,
     streaming_encoding: bool = True,
     push_to_hub: bool = False,
     show_progress: bool = True,
@@ -246,41 +329,39 @@ def record_dataset(
 
     Args:
         root: Output directory; must not exist or be empty. Default ``$HF_LEROBOT_HOME/<repo_id>``.
-        task, cameras, layout, background, image_size, rig: The env setting (see ``OmniDEnvConfig``).
+        suite: ``"omnid"`` (our benchmark) or ``"metaworld"`` (a MetaWorld v3 task: ``task`` one of
+            ``gym_omnid.metaworld_suite.TASKS``, ``OmniDMetaWorldEnvConfig``; needs ``metaworld``).
+        task, cameras, layout, background, image_size, rig: The env setting (see ``OmniDEnvConfig``);
+            ``cameras`` None: the suite's default cameras.
         per_frame_calibration: Write every camera's calibration in every frame as the columns
             ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>`` (the default: datasets of
             different rigs merge, ``cam_wrist`` is possible); False writes it once in the image feature's
             info instead (the static form, ``--static-calibration``).
         episodes: Successful episodes to save.
-        repo_id: Dataset id; default ``local/omnid_<task>``.
+        repo_id: Dataset id; default ``local/omnid_<task>`` (``local/omnid_metaworld_<task>``).
         seed: Attempt ``i`` resets the env with ``seed + i``.
         max_attempts: Bound on expert episodes run (failed ones included); default
             ``2 * episodes + 10``. Reaching it ends the recording with fewer episodes (see the summary).
         episode_length: Time limit of one expert attempt, env steps; an attempt that reaches it fails.
+            Default: the suite's episode length.
         streaming_encoding: Encode videos in threads while recording instead of LeRobot's default of
             writing PNG files and encoding them when the episode is saved (slower: bench_record.py).
         push_to_hub: Upload with LeRobot's ``push_to_hub`` when the recording completes.
         show_progress: Show a tqdm bar over episodes.
     """
     check_positive_int("episodes", episodes)
-    check_wrist_calibration(cameras, per_frame_calibration)
     max_attempts = 2 * episodes + 10 if max_attempts is None else max_attempts
     if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < episodes:
         raise ValueError(f"max_attempts: expected an int >= episodes ({episodes}), got {max_attempts!r}")
-    cfg = OmniDEnvConfig(
-        task=task,
-        cameras=list(cameras),
-        layout=layout,
-        background=background,
-        image_size=image_size,
-        rig=rig,
-        per_frame_calibration=per_frame_calibration,
-        episode_length=episode_length,
+    cfg = env_config(
+        suite, task, cameras, layout, background, image_size, rig, per_frame_calibration, episode_length
     )
-    repo_id = repo_id or f"local/omnid_{task}"
+    check_wrist_calibration(cfg.cameras, per_frame_calibration, suite)
+    repo_id = repo_id or default_repo_id(suite, task)
     if push_to_hub and repo_id.startswith("local/"):
         raise ValueError(
-            f"repo_id: pushing to the Hub needs your namespace (e.g. <user>/omnid_{task}), got {repo_id!r}"
+            f"repo_id: pushing to the Hub needs your namespace "
+            f"(e.g. <user>/{default_repo_id(suite, task).removeprefix('local/')}), got {repo_id!r}"
         )
     root = Path(root) if root is not None else HF_LEROBOT_HOME / repo_id
     _check_root(root)
@@ -300,7 +381,7 @@ def record_dataset(
             fps=cfg.fps,
             root=root,
             features=features,
-            robot_type=ROBOT_TYPE,
+            robot_type=ROBOT_TYPES[suite],
             use_videos=True,
             video_backend="pyav",
             streaming_encoding=streaming_encoding,
@@ -313,7 +394,13 @@ def record_dataset(
             while saved < episodes and attempts < max_attempts:
                 attempts += 1
                 success = _run_expert_episode(
-                    env, dataset, cfg.cameras, cfg.per_frame_calibration, seed + attempts - 1, stop
+                    env,
+                    dataset,
+                    cfg.cameras,
+                    cfg.per_frame_calibration,
+                    seed + attempts - 1,
+                    stop,
+                    lambda env: make_expert(suite, env),
                 )
                 if success is None:
                     break
@@ -357,13 +444,44 @@ def record_dataset(
     )
 
 
+def default_repo_id(suite: str, task: str) -> str:
+    """``local/omnid_<task>`` (``local/omnid_metaworld_<task>`` for the metaworld suite)."""
+    return f"local/omnid_{task}" if suite == "omnid" else f"local/omnid_{suite}_{task}"
+
+
 def _camera_list(text: str) -> list[str]:
+    """Comma-separated camera names (checked against the ``--suite``'s cameras after parsing)."""
     cameras = [c.strip() for c in text.split(",") if c.strip()]
+    if not cameras:
+        raise argparse.ArgumentTypeError(f"expected comma-separated cameras, e.g. cam_b,cam_c, got {text!r}")
+    return cameras
+
+
+def _check_suite_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Resolve the suite-dependent defaults of ``args`` (task, cameras) and check them against the suite."""
+    suite = args.suite
+    if args.task is None:
+        if suite != "omnid":
+            parser.error(f"--task: --suite {suite} needs a task, one of {list(SUITE_TASKS[suite])}")
+        args.task = "select_apple"
+    if args.task not in SUITE_TASKS[suite]:
+        parser.error(
+            f"--task: expected one of {list(SUITE_TASKS[suite])} (--suite {suite}), got {args.task!r}"
+        )
+    if args.cameras is None:
+        args.cameras = list(DEFAULT_CAMERAS[suite])
     try:
-        return validate_cameras("cameras", cameras)
+        validate_cameras("--cameras", args.cameras, SUITE_CAMERAS[suite])
     except ValueError as e:
-        message = str(e).removeprefix("cameras: ")
-        raise argparse.ArgumentTypeError(f"{message} (comma-separated, e.g. cam_b,cam_c)") from None
+        parser.error(f"{e} (comma-separated, e.g. {','.join(DEFAULT_CAMERAS[suite][:2])})")
+    if suite == "metaworld":
+        for flag, value, default in (
+            ("--layout", args.layout, "id"),
+            ("--background", args.background, "id"),
+            ("--rig", args.rig, DEFAULT_RIG),
+        ):
+            if value != default:
+                parser.error(f"{flag}: the metaworld suite has no variants; expected {default}, got {value}")
 
 
 def _image_size(text: str) -> int:
@@ -378,11 +496,21 @@ def _image_size(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="omnid-record",
-        description="Record scripted-expert episodes of an OmniD benchmark task as a LeRobot dataset "
-        "(videos of every camera with calibration, state, action, task text).",
+        description="Record scripted-expert episodes of an OmniD benchmark task (or a MetaWorld task) as a "
+        "LeRobot dataset (videos of every camera with calibration, state, action, task text).",
     )
     parser.add_argument(
-        "--task", choices=TASKS, default="select_apple", help="benchmark task (default: %(default)s)"
+        "--suite",
+        choices=SUITES,
+        default="omnid",
+        help="env suite: omnid (our benchmark) or metaworld (MetaWorld v3 tasks, needs the metaworld "
+        "extra) (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--task",
+        default=None,
+        help=f"task: for --suite omnid one of {', '.join(TASKS)} (default: select_apple); for --suite "
+        "metaworld a MetaWorld v3 name such as assembly-v3 (required)",
     )
     parser.add_argument(
         "--episodes",
@@ -391,16 +519,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="successful episodes to save (default: %(default)s)",
     )
     parser.add_argument(
-        "--layout", choices=LAYOUTS, default="id", help="object placement (default: %(default)s)"
+        "--layout",
+        choices=LAYOUTS,
+        default="id",
+        help="object placement, omnid suite only (default: %(default)s)",
     )
     parser.add_argument(
-        "--background", choices=BACKGROUNDS, default="id", help="table texture (default: %(default)s)"
+        "--background",
+        choices=BACKGROUNDS,
+        default="id",
+        help="table texture, omnid suite only (default: %(default)s)",
     )
     parser.add_argument(
         "--cameras",
         type=_camera_list,
-        default=",".join(CAMERAS),
-        help="comma-separated cameras to record (default: %(default)s)",
+        default=None,
+        help=f"comma-separated cameras to record (default: {','.join(CAMERAS)}; for --suite metaworld "
+        f"{','.join(metaworld_suite.DEFAULT_CAMERAS)})",
     )
     parser.add_argument(
         "--image-size", type=_image_size, default=128, help="square image side, pixels (default: %(default)s)"
@@ -409,7 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--rig",
         choices=RIGS,
         default=DEFAULT_RIG,
-        help="placements of the fixed cameras (default: %(default)s)",
+        help="placements of the fixed cameras, omnid suite only (default: %(default)s)",
     )
     calibration = parser.add_mutually_exclusive_group()
     calibration.add_argument(
@@ -419,7 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=True,
         help="write every camera's calibration in every frame (columns observation.extrinsics.<cam>, "
         "observation.intrinsics.<cam>): datasets of different rigs merge with lerobot-edit-dataset; "
-        "needed for cam_wrist (the default)",
+        "needed for cam_wrist and MetaWorld's hand cameras (the default)",
     )
     calibration.add_argument(
         "--static-calibration",
@@ -438,7 +573,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="output directory, must not exist or be empty (default: $HF_LEROBOT_HOME/<repo-id>)",
     )
-    parser.add_argument("--repo-id", default=None, help="dataset repo id (default: local/omnid_<task>)")
+    parser.add_argument(
+        "--repo-id",
+        default=None,
+        help="dataset repo id (default: local/omnid_<task>, or local/omnid_metaworld_<task>)",
+    )
     parser.add_argument(
         "--push-to-hub",
         action="store_true",
@@ -470,15 +609,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(
             f"--max-attempts: expected at least --episodes ({args.episodes}), got {args.max_attempts}"
         )
+    _check_suite_arguments(parser, args)
     try:
-        check_wrist_calibration(args.cameras, args.per_frame_calibration)
+        check_wrist_calibration(args.cameras, args.per_frame_calibration, args.suite)
     except ValueError as e:
         parser.error(str(e))
-    repo_id = args.repo_id or f"local/omnid_{args.task}"
+    repo_id = args.repo_id or default_repo_id(args.suite, args.task)
     if args.push_to_hub and repo_id.startswith("local/"):
         parser.error(
-            f"--repo-id: --push-to-hub needs your Hub namespace (e.g. <user>/omnid_{args.task}), "
-            f"got {repo_id!r}"
+            f"--repo-id: --push-to-hub needs your Hub namespace "
+            f"(e.g. <user>/{default_repo_id(args.suite, args.task).removeprefix('local/')}), got {repo_id!r}"
         )
     root = args.root if args.root is not None else HF_LEROBOT_HOME / repo_id
     try:
@@ -488,6 +628,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     quiet_third_party_logs()
     summary = record_dataset(
         root,
+        suite=args.suite,
         task=args.task,
         episodes=args.episodes,
         repo_id=repo_id,
