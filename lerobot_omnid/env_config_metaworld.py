@@ -41,6 +41,7 @@ from lerobot_omnid.cli import check_choice, check_positive_int
 from lerobot_omnid.env_config import (
     calibration_dict,
     env_policy_features,
+    validate_blackout_cameras,
     validate_cameras,
     validate_image_size,
 )
@@ -66,6 +67,8 @@ class OmniDMetaWorldEnvConfig(EnvConfig):
         per_frame_calibration: Add every observed camera's calibration of the current frame to the
             observation (``observation.extrinsics.<cam>``, ``observation.intrinsics.<cam>``); needed by a
             policy that reads a hand camera's calibration.
+        blackout_cameras: Observed cameras whose images are all black, for a control in which only the
+            state can drive the policy (``--env.blackout_cameras='[corner,corner2]'``). Default: none.
         episode_length: Time limit of an episode, env steps (MetaWorld's horizon by default).
         fps: Control rate, steps per second; fixed by MetaWorld (80 Hz).
         render_mode: Gymnasium render mode; ``"rgb_array"`` gives ``lerobot-eval`` its videos (a mosaic
@@ -76,6 +79,7 @@ class OmniDMetaWorldEnvConfig(EnvConfig):
     cameras: list[str] = field(default_factory=lambda: list(DEFAULT_CAMERAS))
     image_size: int = 128
     per_frame_calibration: bool = True
+    blackout_cameras: list[str] = field(default_factory=list)
     episode_length: int = MAX_EPISODE_STEPS
     fps: int = CONTROL_FPS
     render_mode: str = "rgb_array"
@@ -86,6 +90,7 @@ class OmniDMetaWorldEnvConfig(EnvConfig):
         check_choice("task", self.task, TASKS)
         self.cameras = validate_cameras("cameras", self.cameras, ALL_CAMERAS)
         validate_image_size("image_size", self.image_size)
+        self.blackout_cameras = validate_blackout_cameras(self.blackout_cameras, self.cameras)
         if not isinstance(self.per_frame_calibration, bool):
             raise ValueError(
                 f"`per_frame_calibration`: expected true or false, got {self.per_frame_calibration!r}"
@@ -115,6 +120,7 @@ class OmniDMetaWorldEnvConfig(EnvConfig):
             "cameras": tuple(self.cameras),
             "image_size": self.image_size,
             "per_frame_calibration": self.per_frame_calibration,
+            "blackout_cameras": tuple(self.blackout_cameras),
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
         }

@@ -50,6 +50,7 @@ def test_cli_parsing_features_and_kwargs() -> None:
         "cameras": ("corner", "gripperPOV"),
         "image_size": SIZE,
         "per_frame_calibration": True,
+        "blackout_cameras": (),
         "render_mode": "rgb_array",
         "max_episode_steps": 7,
     }
@@ -63,6 +64,7 @@ def test_cli_parsing_features_and_kwargs() -> None:
         ({"image_size": 0}, "image_size: expected an int number of pixels"),
         ({"fps": 10}, "fps: MetaWorld steps at a fixed 80 Hz"),
         ({"episode_length": 0}, "`episode_length`: expected a positive integer"),
+        ({"blackout_cameras": ["cam_b"]}, "blackout_cameras: expected distinct cameras among the observed"),
     ],
 )
 def test_bad_fields_are_named(kwargs: dict, expected: str) -> None:

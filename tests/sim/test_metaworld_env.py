@@ -156,6 +156,20 @@ def test_expert_succeeds_through_the_wrapper(make_env, task: str) -> None:
     assert np.all(np.abs(action) <= 1.0)
 
 
+def test_blackout_cameras_are_black_and_the_others_and_the_calibration_unchanged(make_env) -> None:
+    seen = make_env(per_frame_calibration=True)
+    blind = make_env(per_frame_calibration=True, blackout_cameras=["corner", "behindGripper"])
+    obs_seen, _ = seen.reset(seed=5)
+    obs_blind, _ = blind.reset(seed=5)
+    for cam in suite.DEFAULT_CAMERAS:
+        if cam in ("corner", "behindGripper"):
+            assert not obs_blind["pixels"][cam].any()
+        else:
+            assert np.array_equal(obs_blind["pixels"][cam], obs_seen["pixels"][cam])
+        assert np.array_equal(obs_blind[f"extrinsics.{cam}"], obs_seen[f"extrinsics.{cam}"])
+    assert obs_seen["pixels"]["corner"].any()
+
+
 @pytest.mark.parametrize(
     ("kwargs", "expected"),
     [
@@ -163,6 +177,10 @@ def test_expert_succeeds_through_the_wrapper(make_env, task: str) -> None:
         ({"cameras": ["corner", "cam_b"]}, "cameras: expected a non-empty subset of ['corner'"),
         ({"image_size": 0}, "image_size: expected an int or (height, width)"),
         ({"per_frame_calibration": "yes"}, "per_frame_calibration: expected True or False, got 'yes'"),
+        (
+            {"blackout_cameras": ["gripperPOV"]},
+            "blackout_cameras: expected distinct cameras among the observed",
+        ),
     ],
 )
 def test_bad_kwargs_are_named(kwargs: dict, expected: str) -> None:

@@ -137,6 +137,8 @@ class MetaWorldEnv(gym.Env):
             ``FIXED_CAMERAS`` and the hand cameras ``HAND_CAMERAS``, whose calibration changes every step.
         image_size: int (square) or (height, width), pixels.
         per_frame_calibration: add each observed camera's calibration to every observation.
+        blackout_cameras: observed cameras whose images are all zero (black, not rendered): a control in
+            which only the state can drive a policy. The calibration entries stay.
         render_mode: ``"rgb_array"`` (``render()`` returns a mosaic of the observed cameras) or None.
     """
 
@@ -148,6 +150,7 @@ class MetaWorldEnv(gym.Env):
         cameras: Sequence[str] = DEFAULT_CAMERAS,
         image_size: int | tuple[int, int] = DEFAULT_IMAGE_SIZE,
         per_frame_calibration: bool = False,
+        blackout_cameras: Sequence[str] = (),
         render_mode: str | None = "rgb_array",
     ) -> None:
         if task not in TASKS:
@@ -158,6 +161,14 @@ class MetaWorldEnv(gym.Env):
         if not isinstance(per_frame_calibration, bool):
             raise ValueError(f"per_frame_calibration: expected True or False, got {per_frame_calibration!r}")
         self.per_frame_calibration = per_frame_calibration
+        self.blackout_cameras = tuple(blackout_cameras)
+        if not set(self.blackout_cameras) <= set(self.cameras) or len(set(self.blackout_cameras)) != len(
+            self.blackout_cameras
+        ):
+            raise ValueError(
+                f"blackout_cameras: expected distinct cameras among the observed {list(self.cameras)}, "
+                f"got {list(blackout_cameras)}"
+            )
         if render_mode not in (*RENDER_MODES, None):
             raise ValueError(f"render_mode: expected one of {[*RENDER_MODES, None]}, got {render_mode!r}")
         self.render_mode = render_mode
@@ -275,6 +286,9 @@ class MetaWorldEnv(gym.Env):
             atexit.register(_close_at_exit, weakref.ref(self))
         pixels = {}
         for cam in self.cameras:
+            if cam in self.blackout_cameras:
+                pixels[cam] = np.zeros((*self.image_size, 3), dtype=np.uint8)
+                continue
             self._renderer.update_scene(self.data, camera=self._cam_ids[cam])
             pixels[cam] = self._renderer.render()
         return pixels
