@@ -41,9 +41,9 @@ Flag = tuple[str, str]
 """A command-line option and why it is set."""
 
 
-def input_features(cameras: Sequence[str], image_size: int) -> str:
+def input_features(cameras: Sequence[str], image_size: int, state_dim: int = STATE_DIM) -> str:
     """``--policy.input_features`` JSON: the state and the images of ``cameras`` (the policy's inputs)."""
-    features = {"observation.state": {"type": "STATE", "shape": [STATE_DIM]}}
+    features = {"observation.state": {"type": "STATE", "shape": [state_dim]}}
     for cam in cameras:
         features[f"observation.images.{cam}"] = {"type": "VISUAL", "shape": [3, image_size, image_size]}
     return json.dumps(features, separators=(",", ":"))

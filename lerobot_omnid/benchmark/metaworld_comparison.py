@@ -1,0 +1,273 @@
+"""OmniD against LeRobot's DP on MetaWorld, a benchmark we did not write, beside the published numbers.
+
+The protocol (docs/benchmark.md#metaworld-its-protocol), fixed before any of its runs, follows the 3D
+Diffusion Policy paper's MetaWorld protocol where a CPU allows:
+
+1. *Data*: per task of ``TASKS`` (the five with published per-task numbers), 10 expert demonstrations
+   (MetaWorld's scripted policy through ``omnid-record --suite metaworld``, env seeds 0-9, all successful),
+   cameras ``corner``, ``corner2``, ``corner3`` and the hand camera ``behindGripper`` (calibrated per
+   frame), ``IMAGE_SIZE`` px.
+2. *Models* (``MODELS``), each trained with ``lerobot-train --seed=1000`` for ``STEPS`` steps with the
+   benchmark's ``mini`` options (``methods.method_flags``): OmniD on the four cameras; OmniD on the three
+   fixed cameras (what the moving camera adds); DP on the same four cameras; DP on ``corner2`` alone, the
+   published setting (one camera), the bridge to the published numbers. OmniD's volume is MetaWorld's
+   workspace in MetaWorld's frame (``VOLUME_BOUNDS``).
+3. *Test*: ``lerobot-eval`` on env seeds ``TEST_SEEDS`` (``TEST_EPISODES`` each; disjoint from the
+   demonstrations' 0-9), episodes of at most ``EPISODE_LENGTH`` steps; every model's blind control (every
+   camera black) on the same seeds. Reported: the final checkpoint's success (mean of final), Wilson 95 %
+   intervals, Fisher p of OmniD against each DP; the published numbers (DP3 paper, best 5 evaluations of
+   3 seeds, MetaWorld v2, 84 px, one camera) only beside them, labelled as such.
+
+Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``
+and ``<out>/summary.json``; ``--report-only --summary FILE`` rebuilds the report from such a summary alone.
+
+    MUJOCO_GL=egl python -m lerobot_omnid.benchmark.metaworld_comparison --out outputs/metaworld
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+from gym_omnid.metaworld_suite import DEFAULT_CAMERAS, FIXED_CAMERAS, STATE_DIM
+
+from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.methods import input_features, method_flags
+from lerobot_omnid.benchmark.plan import MINI, TRAIN_SEED
+from lerobot_omnid.cli import add_protocol_options, report_from_summary
+from lerobot_omnid.measure.engine import (
+    CHECKPOINT,
+    Run,
+    code_commit,
+    describe_plan,
+    execute,
+    is_done,
+    plan,
+    stamp_commit,
+)
+from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
+
+TASKS = ("assembly-v3", "disassemble-v3", "stick-push-v3", "push-v3", "pick-place-wall-v3")
+PUBLISHED = {  # task: (DP3, image-based Diffusion Policy) success %, DP3 paper Tables I and XVIII
+    "assembly-v3": (99, 15),
+    "disassemble-v3": (69, 43),
+    "stick-push-v3": (97, 63),
+    "push-v3": (51, 30),
+    "pick-place-wall-v3": (35, 5),
+}
+DEMONSTRATIONS = 10
+IMAGE_SIZE = 64  # px: the benchmark's mini size (the published image DP: 84)
+STEPS = 2000
+EPISODE_LENGTH = 300  # env steps at 80 Hz: 1.5x the slowest expert episode (disassemble, 206 steps)
+TEST_SEEDS = (1000, 2000)  # two disjoint ranges of env seeds, reported apart and pooled
+TEST_EPISODES = 15  # per range: 30 per cell
+VOLUME_BOUNDS = "[[-0.4,0.4],[0.35,0.95],[-0.05,0.35]]"  # MetaWorld's frame: x right, y forward, z up (m)
+VOLUME_SHAPE = "[16,12,8]"  # 5 cm cells
+MODELS = {  # name: (LeRobot policy type, cameras)
+    "omnid": ("omnid", DEFAULT_CAMERAS),
+    "omnid_fixed": ("omnid", FIXED_CAMERAS),
+    "dp": ("diffusion", DEFAULT_CAMERAS),
+    "dp_corner2": ("diffusion", ("corner2",)),
+}
+COMPARED = (("omnid", "dp"), ("omnid", "dp_corner2"), ("omnid", "omnid_fixed"))
+
+
+def data_dir(out: Path, task: str) -> Path:
+    return out / "data" / task
+
+
+def record(out: Path, task: str) -> list[str]:
+    root = data_dir(out, task)
+    return [
+        str(commands.BIN / "omnid-record"),
+        *("--suite", "metaworld", "--task", task, "--episodes", str(DEMONSTRATIONS)),
+        *("--cameras", ",".join(DEFAULT_CAMERAS), "--image-size", str(IMAGE_SIZE), "--seed", "0"),
+        *("--root", str(root), "--repo-id", f"local/{root.name}"),
+    ]
+
+
+def train(out: Path, model: str, task: str) -> list[str]:
+    """``lerobot-train`` of ``model`` on ``task``'s demonstrations: mini's options, this suite's cameras,
+    state size and (OmniD) volume."""
+    policy, cameras = MODELS[model]
+    flags = [f"--policy.type={policy}", "--policy.device=cpu", "--policy.push_to_hub=false"]
+    for flag, _ in method_flags(policy, MINI):
+        name = flag.partition("=")[0]
+        if name in ("--policy.cameras", "--policy.volume_bounds", "--policy.volume_shape"):
+            continue
+        flags.append(flag)
+    if policy == "omnid":
+        flags += [f"--policy.cameras={commands.json_list(cameras)}"]
+        flags += [f"--policy.volume_bounds={VOLUME_BOUNDS}", f"--policy.volume_shape={VOLUME_SHAPE}"]
+    else:  # only the state and these images: the dataset's calibration columns are no input of DP
+        flags.append(f"--policy.input_features={input_features(cameras, IMAGE_SIZE, STATE_DIM)}")
+    return commands.train_command(
+        data_dir(out, task), out / "train" / model / task, flags, STEPS, MINI.batch_size, seed=TRAIN_SEED
+    )
+
+
+def eval_dir(out: Path, model: str, task: str, seed: int, blind: bool) -> Path:
+    return out / ("eval_blind" if blind else "eval") / model / task / f"seed{seed}"
+
+
+def evaluate(out: Path, model: str, task: str, seed: int, blind: bool) -> list[str]:
+    cameras = MODELS[model][1]
+    cmd = [
+        str(commands.BIN / "lerobot-eval"),
+        f"--policy.path={out / 'train' / model / task / CHECKPOINT}",
+        "--policy.device=cpu",
+        "--env.type=omnid_metaworld",
+        f"--env.task={task}",
+        f"--env.cameras=[{','.join(cameras)}]",
+        f"--env.image_size={IMAGE_SIZE}",
+        f"--env.episode_length={EPISODE_LENGTH}",
+        f"--eval.n_episodes={TEST_EPISODES}",
+        f"--eval.batch_size={MINI.eval_batch_size}",
+        f"--seed={seed}",
+        f"--output_dir={eval_dir(out, model, task, seed, blind)}",
+    ]
+    return [*cmd, f"--env.blackout_cameras=[{','.join(cameras)}]"] if blind else cmd
+
+
+def protocol(out: Path, tasks: Sequence[str], models: Sequence[str]) -> list[Run]:
+    """Per task: record, then per model train and evaluate (and its blind control) on every test range."""
+    runs: list[Run] = []
+    for task in tasks:
+        recorded = Run(f"record/{task}", "record", tuple(record(out, task)), data_dir(out, task))
+        runs.append(recorded)
+        for model in models:
+            name = f"train/{model}/{task}"
+            output = out / "train" / model / task
+            runs.append(Run(name, "train", tuple(train(out, model, task)), output, (recorded.name,)))
+            for seed in TEST_SEEDS:
+                for blind in (False, True):
+                    folder = eval_dir(out, model, task, seed, blind)
+                    cmd = tuple(evaluate(out, model, task, seed, blind))
+                    runs.append(Run(str(folder.relative_to(out)), "eval", cmd, folder, (name,)))
+    return plan(runs, out)
+
+
+def summarise(out: Path, runs: Sequence[Run]) -> dict:
+    """Every finished evaluation of this plan: model, task, control, env-seed range, counts, commit."""
+    rows = []
+    for run in runs:
+        if run.kind != "eval" or not is_done(run):
+            continue
+        blind, model, task, seed = run.output.relative_to(out).parts
+        successes, episodes = read_eval_info(run.output / "eval_info.json")
+        rows.append(
+            {
+                "model": model,
+                "task": task,
+                "control": "blind" if blind == "eval_blind" else "",
+                "seed": int(seed.removeprefix("seed")),
+                "successes": successes,
+                "episodes": episodes,
+                "commit": stamp_commit(run),
+            }
+        )
+    return {
+        "steps": STEPS,
+        "demonstrations": DEMONSTRATIONS,
+        "image_size": IMAGE_SIZE,
+        "episode_length": EPISODE_LENGTH,
+        "test_seeds": list(TEST_SEEDS),
+        "published": PUBLISHED,
+        "results": rows,
+    }
+
+
+def count_text(counts: tuple[int, int] | None) -> str:
+    if counts is None:
+        return "-"
+    est = wilson_interval(*counts)
+    return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
+
+
+def write_report(summary: dict, path: Path) -> None:
+    """``report.md``: per task and model the success pooled over the test ranges (each range too), its
+    blind control, Fisher p of OmniD against the others, the published numbers beside."""
+    cells: dict[tuple[str, str, str], dict[int, tuple[int, int]]] = {}
+    for r in summary["results"]:
+        cells.setdefault((r["model"], r["task"], r["control"]), {})[r["seed"]] = (
+            r["successes"],
+            r["episodes"],
+        )
+
+    def pooled(model: str, task: str, control: str = "") -> tuple[int, int] | None:
+        found = cells.get((model, task, control))
+        return (sum(s for s, _ in found.values()), sum(n for _, n in found.values())) if found else None
+
+    models = [m for m in MODELS if any(k[0] == m for k in cells)]
+    tasks = [t for t in PUBLISHED if any(k[1] == t for k in cells)]
+    lines = [
+        "# MetaWorld: OmniD against LeRobot's DP (final checkpoint), published numbers beside",
+        "",
+        f"{summary['demonstrations']} demonstrations per task, {summary['image_size']} px, "
+        f"{summary['steps']} training steps, episodes of at most {summary['episode_length']} steps; test env "
+        f"seeds from {', '.join(map(str, summary['test_seeds']))} (per range: second table). Published: "
+        "DP3 paper, best 5 evaluations of 3 training seeds, MetaWorld v2, one 84 px camera (not ours).",
+        "",
+        "| task | " + " | ".join(f"{m} | {m} blind" for m in models) + " | published DP3 | published DP |",
+        "|---|" + "---|" * (2 * len(models) + 2),
+    ]
+    for task in tasks:
+        row = [f"{count_text(pooled(m, task))} | {count_text(pooled(m, task, 'blind'))}" for m in models]
+        dp3, dp = summary["published"][task]
+        lines.append(f"| {task} | " + " | ".join(row) + f" | {dp3} % | {dp} % |")
+    lines += ["", "| task | env seeds | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
+    for task in tasks:
+        for seed in summary["test_seeds"]:
+            row = [count_text(cells.get((m, task, ""), {}).get(seed)) for m in models]
+            lines.append(f"| {task} | from {seed} | " + " | ".join(row) + " |")
+    lines += ["", "| task | comparison | Fisher p |", "|---|---|---|"]
+    for task in tasks:
+        for a, b in COMPARED:
+            if (ca := pooled(a, task)) and (cb := pooled(b, task)):
+                lines.append(f"| {task} | {a} vs {b} | {fisher_exact(*ca, *cb):.3g} |")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, default=Path("outputs/metaworld"))
+    parser.add_argument("--tasks", default=",".join(TASKS), help=f"subset of {','.join(TASKS)}")
+    parser.add_argument("--models", default=",".join(MODELS), help=f"subset of {','.join(MODELS)}")
+    add_protocol_options(parser)
+    args = parser.parse_args(argv)
+    out = args.out.resolve()
+    if report_from_summary(parser, args, out, write_report):
+        return 0
+    tasks, models = args.tasks.split(","), args.models.split(",")
+    if unknown := [t for t in tasks if t not in TASKS]:
+        parser.error(f"--tasks: expected names from {','.join(TASKS)}, got {','.join(unknown)}")
+    if unknown := [m for m in models if m not in MODELS]:
+        parser.error(f"--models: expected names from {','.join(MODELS)}, got {','.join(unknown)}")
+    runs = protocol(out, tasks, models)
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return 0
+
+    def write_outputs(_: Run | None = None) -> None:
+        summary = summarise(out, runs)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        write_report(summary, out / "report.md")
+
+    if not args.report_only:
+        execute(
+            runs, out, commit=code_commit(), desc="metaworld", on_done=write_outputs, stop_on_failure=True
+        )
+    write_outputs()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,102 @@
+"""The MetaWorld comparison: every model trains on the same demonstrations with the same steps and seed,
+each sees exactly its cameras, the test seeds are disjoint from the demonstrations', every evaluation has
+its blind control, and the report is rebuilt from a summary alone."""
+
+import json
+from pathlib import Path
+
+import pytest
+from gym_omnid.metaworld_suite import STATE_DIM
+
+from lerobot_omnid.benchmark import metaworld_comparison as mw
+from lerobot_omnid.measure import engine
+
+OUT = Path("out")
+
+
+def options(cmd: tuple[str, ...] | list[str]) -> dict[str, str]:
+    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
+
+
+def test_models_train_alike_on_the_same_demonstrations():
+    trainings = {m: options(mw.train(OUT, m, "push-v3")) for m in mw.MODELS}
+    for opts in trainings.values():
+        assert opts["--dataset.root"] == str(OUT / "data" / "push-v3")
+        assert opts["--steps"] == str(mw.STEPS) and opts["--seed"] == "1000"
+    # What differs: the policy and its cameras (OmniD: by name; DP: its input features, state included).
+    assert json.loads(trainings["omnid"]["--policy.cameras"]) == list(mw.MODELS["omnid"][1])
+    assert json.loads(trainings["omnid_fixed"]["--policy.cameras"]) == ["corner", "corner2", "corner3"]
+    assert trainings["omnid"]["--policy.volume_bounds"] == mw.VOLUME_BOUNDS
+    features = json.loads(trainings["dp_corner2"]["--policy.input_features"])
+    assert features == {
+        "observation.state": {"type": "STATE", "shape": [STATE_DIM]},
+        "observation.images.corner2": {"type": "VISUAL", "shape": [3, mw.IMAGE_SIZE, mw.IMAGE_SIZE]},
+    }
+    assert len(json.loads(trainings["dp"]["--policy.input_features"])) == 1 + 4
+    common = {
+        k: v for k, v in trainings["dp"].items() if k not in ("--policy.input_features", "--output_dir")
+    }
+    assert common == {
+        k: v
+        for k, v in trainings["dp_corner2"].items()
+        if k not in ("--policy.input_features", "--output_dir")
+    }
+
+
+def test_demonstrations_and_test_seeds_are_disjoint():
+    cmd = mw.record(OUT, "push-v3")
+    record = dict(zip(cmd[1::2], cmd[2::2], strict=True))  # omnid-record takes "--option value" pairs
+    assert record["--suite"] == "metaworld" and record["--episodes"] == str(mw.DEMONSTRATIONS)
+    demonstrations = range(int(record["--seed"]), int(record["--seed"]) + mw.DEMONSTRATIONS)
+    tested = [range(s, s + mw.TEST_EPISODES) for s in mw.TEST_SEEDS]
+    seeds = [set(demonstrations), *map(set, tested)]
+    assert sum(map(len, seeds)) == len(set().union(*seeds))
+
+
+def test_every_evaluation_has_its_blind_control_on_the_same_seeds(tmp_path):
+    runs = mw.protocol(tmp_path, ["push-v3"], list(mw.MODELS))
+    evals = [options(r.cmd) for r in runs if r.kind == "eval"]
+    assert len(evals) == len(mw.MODELS) * len(mw.TEST_SEEDS) * 2
+    seen = [e for e in evals if "--env.blackout_cameras" not in e]
+    blind = [e for e in evals if "--env.blackout_cameras" in e]
+    assert {(e["--policy.path"], e["--seed"]) for e in seen} == {
+        (e["--policy.path"], e["--seed"]) for e in blind
+    }
+    assert all(e["--env.blackout_cameras"] == e["--env.cameras"] for e in blind)
+    assert all(e["--env.episode_length"] == str(mw.EPISODE_LENGTH) for e in evals)
+
+
+def test_report_pools_the_ranges_and_puts_the_published_numbers_beside(tmp_path, capsys):
+    runs = mw.protocol(tmp_path, ["push-v3"], ["omnid", "dp"])
+    counts = {"eval/omnid": 12, "eval_blind/omnid": 1, "eval/dp": 6, "eval_blind/dp": 0}
+    for run in runs:
+        if run.kind != "eval":
+            continue
+        successes = next(v for k, v in counts.items() if run.name.startswith(k + "/"))
+        run.output.mkdir(parents=True)
+        overall = {"pc_success": 100 * successes / mw.TEST_EPISODES, "n_episodes": mw.TEST_EPISODES}
+        (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
+        engine.write_stamp(run, "abc", 1.0)
+    summary = mw.summarise(tmp_path, runs)
+    source = tmp_path / "summary.json"
+    source.write_text(json.dumps(summary))
+    assert mw.main(["--out", str(tmp_path / "rebuilt"), "--report-only", "--summary", str(source)]) == 0
+    report = (tmp_path / "rebuilt" / "report.md").read_text()
+    assert "| push-v3 | 24/30 (62.7-90.5 %) | 2/30 (1.8-21.3 %) | 12/30 (24.6-57.7 %) | 0/30" in report
+    assert "| 51 % | 30 % |" in report  # the published DP3 and DP, beside
+    assert "| push-v3 | from 2000 | 12/15" in report
+    assert "| push-v3 | omnid vs dp | 0.00" in report
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--tasks", "push-v3,make-tea-v3"], "--tasks: expected names from assembly-v3,"),
+        (["--models", "omnid,act"], "--models: expected names from omnid,"),
+        (["--summary", "s.json"], "--summary: expected with --report-only"),
+    ],
+)
+def test_bad_arguments_name_the_option(argv, message, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        mw.main(["--out", str(tmp_path), *argv])
+    assert message in capsys.readouterr().err
