@@ -19,7 +19,8 @@ The protocol (docs/benchmark.md#sizing-the-six-tasks), fixed before any of its r
    its task's budget.
 
 Runs on the experiment engine (resumable; ``--dry-run`` prints every command; the next budget of a task is
-planned once its validation is done); writes ``<out>/report.md`` and ``<out>/summary.json``, and
+planned once its validation is done; ``--also`` takes committed summaries of earlier sessions, whose
+validated budgets are not run again); writes ``<out>/report.md`` and ``<out>/summary.json``, and
 ``--report-only --summary FILE`` rebuilds the report from such a summary alone.
 
     MUJOCO_GL=egl python -m lerobot_omnid.benchmark.task_sizing --out outputs/six_tasks
@@ -38,7 +39,16 @@ from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import method_flags
 from lerobot_omnid.benchmark.plan import PROFILES, TRAIN_SEED
 from lerobot_omnid.cli import add_protocol_options, report_from_summary
-from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
+from lerobot_omnid.measure.engine import (
+    CHECKPOINT,
+    Run,
+    code_commit,
+    describe_plan,
+    execute,
+    is_done,
+    plan,
+    stamp_commit,
+)
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import wilson_interval
 
@@ -104,36 +114,53 @@ def size(counts: dict[int, tuple[int, int]]) -> int | str | None:
     return None
 
 
-def protocol(out: Path, tasks: Sequence[str]) -> list[Run]:
+Known = dict[str, dict[int, tuple[int, int, str | None]]]
+"""Validation (successes, episodes, commit) already measured, per task and budget: those of committed
+summaries (``--also``)."""
+
+
+def protocol(out: Path, tasks: Sequence[str], known: Known | None = None) -> list[Run]:
     """Every task's runs up to the budget the validation so far calls for: a budget is planned when the
-    previous one is validated and below the threshold."""
+    previous one is validated (here or in ``known``) and below the threshold; a known budget is not run."""
     runs: list[Run] = []
     for task in tasks:
-        budgets = [BUDGETS[0]]
-        while True:
-            planned = plan(task_runs(out, task, budgets), out)
-            last = next(r for r in planned if r.output == validation_dir(out, task, budgets[-1]))
-            if not is_done(last) or len(budgets) == len(BUDGETS):
+        counts = {steps: c[:2] for steps, c in (known or {}).get(task, {}).items()}
+        todo: list[int] = []
+        for steps in BUDGETS:
+            if size(counts) != "pending":
                 break
-            if read_eval_info(last.output / "eval_info.json")[0] >= THRESHOLD:
+            if steps in counts:
+                continue
+            todo.append(steps)
+            validated = next(
+                r
+                for r in plan(task_runs(out, task, todo), out)
+                if r.output == validation_dir(out, task, steps)
+            )
+            if not is_done(validated):
                 break
-            budgets.append(BUDGETS[len(budgets)])
-        runs += task_runs(out, task, budgets)
+            counts[steps] = read_eval_info(validated.output / "eval_info.json")
+        if todo:
+            runs += task_runs(out, task, todo)
     return plan(runs, out)
 
 
-def summarise(out: Path, runs: Sequence[Run], tasks: Sequence[str]) -> dict:
-    """Per task the validation counts of every budget done for this plan, and the rule's budget."""
+def summarise(out: Path, runs: Sequence[Run], tasks: Sequence[str], known: Known | None = None) -> dict:
+    """Per task the validation counts of every budget done for this plan or ``known``, the commit that
+    measured each here (known ones: as their summary says), and the rule's budget."""
     done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
     results = {}
     for task in tasks:
-        counts = {
-            steps: read_eval_info(validation_dir(out, task, steps) / "eval_info.json")
-            for steps in BUDGETS
-            if validation_dir(out, task, steps) in done
-        }
+        given = (known or {}).get(task, {})
+        counts = {steps: c[:2] for steps, c in given.items()}
+        commits = {str(steps): c[2] for steps, c in given.items()}
+        for steps in BUDGETS:
+            if (folder := validation_dir(out, task, steps)) in done:
+                counts[steps] = read_eval_info(folder / "eval_info.json")
+                commits[str(steps)] = stamp_commit(done[folder])
         results[task] = {
-            "validation": {str(steps): list(c) for steps, c in counts.items()},
+            "validation": {str(steps): list(counts[steps]) for steps in BUDGETS if steps in counts},
+            "commits": {steps: commits[steps] for steps in map(str, BUDGETS) if steps in commits},
             "budget": size(counts),
         }
     return {
@@ -145,6 +172,21 @@ def summarise(out: Path, runs: Sequence[Run], tasks: Sequence[str]) -> dict:
         "train_seed": TRAIN_SEED,
         "tasks": results,
     }
+
+
+def read_known(paths: Sequence[Path]) -> Known:
+    """The validation counts of committed summaries; a (task, budget) given twice is an error."""
+    known: Known = {}
+    for path in paths:
+        for task, result in json.loads(path.read_text())["tasks"].items():
+            for steps, (successes, episodes) in result["validation"].items():
+                if int(steps) in known.setdefault(task, {}):
+                    raise ValueError(
+                        f"--also: expected each task and budget once, got {task} at {steps} steps again "
+                        f"in {path}"
+                    )
+                known[task][int(steps)] = (successes, episodes, result.get("commits", {}).get(steps))
+    return known
 
 
 def write_report(summary: dict, path: Path) -> None:
@@ -186,6 +228,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--tasks", default=",".join(TASKS), help=f"comma-separated subset of {','.join(TASKS)} (default all)"
     )
+    parser.add_argument(
+        "--also",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="SUMMARY",
+        help="committed summaries of earlier runs: their validated budgets count as measured, not rerun",
+    )
     add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
@@ -194,7 +244,11 @@ def main(argv: list[str] | None = None) -> int:
     tasks = [t for t in args.tasks.split(",") if t]
     if unknown := [t for t in tasks if t not in TASKS]:
         parser.error(f"--tasks: expected names from {','.join(TASKS)}, got {','.join(unknown)}")
-    runs = protocol(out, tasks)
+    try:
+        known = read_known(args.also)
+    except ValueError as e:
+        parser.error(str(e))
+    runs = protocol(out, tasks, known)
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return 0
@@ -207,17 +261,19 @@ def main(argv: list[str] | None = None) -> int:
                 out,
                 commit=code_commit(),
                 desc="task sizing",
-                on_done=lambda _, runs=runs: write_outputs(out, runs, tasks),
+                on_done=lambda _, runs=runs: write_outputs(out, runs, tasks, known),
                 stop_on_failure=True,
             )
-            runs = protocol(out, tasks)
-    write_outputs(out, runs, tasks)
+            runs = protocol(out, tasks, known)
+    write_outputs(out, runs, tasks, known)
     return 0
 
 
-def write_outputs(out: Path, runs: Sequence[Run], tasks: Sequence[str]) -> None:
-    """``summary.json``, ``sizing.json`` (each task's budget) and ``report.md`` from the runs done."""
-    summary = summarise(out, runs, tasks)
+def write_outputs(out: Path, runs: Sequence[Run], tasks: Sequence[str], known: Known) -> None:
+    """``summary.json``, ``sizing.json`` (each task's budget) and ``report.md`` from the runs done and the
+    ``known`` counts."""
+    summary = summarise(out, runs, tasks, known)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     budgets = {task: result["budget"] for task, result in summary["tasks"].items()}
     (out / SIZING_FILE).write_text(json.dumps(budgets, indent=2) + "\n")

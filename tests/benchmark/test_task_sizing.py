@@ -77,8 +77,39 @@ def test_a_longer_budget_only_for_a_task_validated_below_the_threshold(tmp_path)
     for run in longer:
         finish(tmp_path, run, 0)
     summary = ts.summarise(tmp_path, ts.protocol(tmp_path, tasks), tasks)
-    assert summary["tasks"]["select_apple"] == {"validation": {"1000": [6, 20]}, "budget": 1000}
+    assert summary["tasks"]["select_apple"] == {
+        "validation": {"1000": [6, 20]},
+        "commits": {"1000": "abc"},
+        "budget": 1000,
+    }
     assert summary["tasks"]["get_coffee"]["budget"] is None  # not learned within the last budget
+
+
+def test_budgets_of_committed_summaries_are_not_run_again(tmp_path):
+    """A later session passes the earlier sessions' summaries with --also: a task decided there plans
+    nothing, one validated below the threshold there plans only its next budget."""
+    earlier = {
+        "tasks": {
+            "select_apple": {"validation": {"1000": [9, 20]}, "commits": {"1000": "c1"}, "budget": 1000},
+            "get_coffee": {"validation": {"1000": [2, 20]}, "commits": {"1000": "c2"}, "budget": "pending"},
+        }
+    }
+    source = tmp_path / "earlier.json"
+    source.write_text(json.dumps(earlier))
+    known = ts.read_known([source])
+    tasks = ["select_apple", "get_coffee", "texas_holdem"]
+    runs = ts.protocol(tmp_path / "out", tasks, known)
+    assert [r.name for r in runs if r.kind != "record"] == [
+        f"train_steps{ts.BUDGETS[1]}/diffusion/get_coffee",
+        f"validation/diffusion/get_coffee/steps{ts.BUDGETS[1]}",
+        "train/diffusion/texas_holdem",
+        f"validation/diffusion/texas_holdem/steps{ts.BUDGETS[0]}",
+    ]
+    summary = ts.summarise(tmp_path / "out", runs, tasks, known)
+    assert summary["tasks"]["select_apple"] == earlier["tasks"]["select_apple"]
+    assert summary["tasks"]["get_coffee"]["budget"] == "pending"
+    with pytest.raises(ValueError, match="expected each task and budget once, got select_apple at 1000"):
+        ts.read_known([source, source])
 
 
 @pytest.mark.parametrize(
