@@ -15,8 +15,8 @@ interpolation function.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -64,11 +64,14 @@ def make_expert(env: OmniDEnv) -> ScriptedExpert:
     return ScriptedExpert(start, plan)
 
 
-def run_expert_episode(env: gym.Env, seed: int, max_steps: int = MAX_EPISODE_STEPS) -> tuple[bool, int]:
-    """Reset ``env`` (a gymnasium env, wrapped or not) with ``seed`` and run the expert until the episode
-    ends; returns (success, env steps taken)."""
+def run_expert_episode(
+    env: gym.Env, seed: int, max_steps: int = MAX_EPISODE_STEPS, make: Callable[[Any], Any] = make_expert
+) -> tuple[bool, int]:
+    """Reset ``env`` (a gymnasium env, wrapped or not) with ``seed`` and run the expert ``make`` plans for
+    it (one with an ``act()``; default: this package's) until the episode ends; returns (success, env steps
+    taken)."""
     env.reset(seed=seed)
-    expert = make_expert(env.unwrapped)
+    expert = make(env.unwrapped)
     for step in range(1, max_steps + 1):
         _, _, terminated, truncated, info = env.step(expert.act())
         if terminated or truncated:

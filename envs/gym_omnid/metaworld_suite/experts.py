@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+import gym_omnid.experts
+
 if TYPE_CHECKING:
     from gym_omnid.metaworld_suite.env import MetaWorldEnv
 
@@ -46,12 +48,6 @@ def make_expert(env: MetaWorldEnv) -> MetaWorldExpert:
 
 
 def run_expert_episode(env: Any, seed: int, max_steps: int) -> tuple[bool, int]:
-    """Reset ``env`` (a gymnasium env, wrapped or not) with ``seed`` and run the expert until the episode
-    ends or ``max_steps`` steps; returns (success, env steps taken)."""
-    env.reset(seed=seed)
-    expert = make_expert(env.unwrapped)
-    for step in range(1, max_steps + 1):
-        _, _, terminated, truncated, info = env.step(expert.act())
-        if terminated or truncated:
-            return bool(info["is_success"]), step
-    return False, max_steps
+    """Reset ``env`` (a gymnasium env, wrapped or not) with ``seed`` and run MetaWorld's expert until the
+    episode ends or ``max_steps`` steps; returns (success, env steps taken)."""
+    return gym_omnid.experts.run_expert_episode(env, seed, max_steps, make=make_expert)
