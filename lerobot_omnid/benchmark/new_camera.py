@@ -1,0 +1,278 @@
+"""A new camera from ten episodes: which recipe, chosen on validation before any test run.
+
+The protocol (docs/benchmark.md#a-new-camera-its-protocol), fixed before any of its runs:
+
+1. *Data*: the benchmark's ``mini`` training set of ``select_apple`` (cameras B-E) and its few-shot set
+   (10 episodes seen by camera A only, from env seed 100000), recorded by ``omnid-benchmark``'s own commands
+   into the same folders.
+2. *Pre-trained models* (``PRETRAINED``), OmniD with the ``mini`` options, ``--seed=1000``: ``mini`` itself
+   (the benchmark's run) and ``single_camera``, trained with half of its samples fused from one camera
+   (``--policy.single_camera_rate=0.5``), so that the OFG learns to lift the scene from a single view.
+3. *Hypotheses* (``HYPOTHESES``): a pre-trained model fine-tuned on the camera-A episodes for some steps at
+   some learning rate: the paper's recipe at CPU size (``mini``, 200 steps, the benchmark's), longer
+   fine-tuning (1000 steps), longer at a lower learning rate (1e-4), and longer from ``single_camera``.
+   Zero-shot (no fine-tuning) each pre-trained model is evaluated on camera A too.
+4. *Validation*, never reported as a result: ``lerobot-eval`` with camera A only, ID, env seeds
+   ``VALIDATION_SEED`` ... (``VALIDATION_EPISODES``), disjoint from every other seed set; the policy reads
+   camera A's calibration from the env's every frame.
+5. *Rule* (:func:`select`): the most validation successes; among those within ``TIE_MARGIN`` of the
+   most, the fewest fine-tuning steps, then the order of ``HYPOTHESES`` (the paper's first).
+6. *Test*, once selected, on ``select_apple`` and ``select_chemistry_tube`` with two training seeds: the
+   selected recipe and the paper's, OmniD and DP (DP: the same steps and learning rate; the single-camera
+   option is OmniD's own), 30 episodes per cell on two disjoint env-seed ranges, blind controls, the probe
+   error beside each model. This module plans the validation; the test phase is planned from its
+   selection.
+
+Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``,
+``<out>/summary.json`` and, once every hypothesis is validated, ``<out>/selection.json``.
+
+    MUJOCO_GL=egl python -m lerobot_omnid.benchmark.new_camera --out outputs/new_camera
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+from gym_omnid import TRAIN_CAMERAS
+
+from lerobot_omnid.benchmark import commands
+from lerobot_omnid.benchmark.methods import CAMERA_A, finetune_flags, method_flags
+from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, MINI, TASK0, TRAIN_SEED
+from lerobot_omnid.cli import add_protocol_options, report_from_summary
+from lerobot_omnid.keys import image_key
+from lerobot_omnid.measure.engine import (
+    CHECKPOINT,
+    Run,
+    code_commit,
+    describe_plan,
+    execute,
+    is_done,
+    plan,
+    stamp_commit,
+)
+from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.stats import wilson_interval
+
+PRETRAINED = {  # name: options added to mini's OmniD
+    "mini": (),
+    "single_camera": ("--policy.single_camera_rate=0.5",),
+}
+HYPOTHESES = {  # name: (pre-trained model, fine-tuning steps, learning rate or None for mini's)
+    "paper": ("mini", MINI.finetune_steps, None),
+    "long": ("mini", 1000, None),
+    "long_low_lr": ("mini", 1000, 1e-4),
+    "single_camera_long": ("single_camera", 1000, None),
+}
+VALIDATION_SEED = 70_000
+VALIDATION_EPISODES = 20
+TIE_MARGIN = 1
+SELECTION_FILE = "selection.json"
+TRAIN_DATA, FEWSHOT_DATA = f"{TASK0}_bcde", f"{TASK0}_a_fewshot"  # the benchmark's folder names
+
+
+def pretrained_dir(out: Path, name: str) -> Path:
+    """The benchmark's own folder for ``mini``, ``train_<name>/`` for the others."""
+    return out / ("train" if name == "mini" else f"train_{name}") / "omnid" / TASK0
+
+
+def finetuned_dir(out: Path, hypothesis: str) -> Path:
+    return out / "finetune_validation" / hypothesis
+
+
+def validation_dir(out: Path, model: str) -> Path:
+    return out / "validation" / model
+
+
+def records(out: Path) -> list[Run]:
+    """The B-E training set and the camera-A few-shot set, as ``omnid-benchmark`` records them."""
+    train = out / "data" / TRAIN_DATA
+    fewshot = out / "data" / FEWSHOT_DATA
+    p = MINI
+    cmd_train = commands.record_command(TASK0, p.episodes, TRAIN_CAMERAS, p.image_size, train, seed=0)
+    cmd_fewshot = commands.record_command(
+        TASK0, p.fewshot_episodes, CAMERA_A, p.image_size, fewshot, seed=FEWSHOT_SEED
+    )
+    return [
+        Run(f"record/{TRAIN_DATA}", "record", tuple(cmd_train), train, episodes=p.episodes),
+        Run(f"record/{FEWSHOT_DATA}", "record", tuple(cmd_fewshot), fewshot, episodes=p.fewshot_episodes),
+    ]
+
+
+def pretrain(out: Path, name: str) -> list[str]:
+    flags = ["--policy.type=omnid", "--policy.device=cpu", "--policy.push_to_hub=false"]
+    flags += [flag for flag, _ in method_flags("omnid", MINI)] + list(PRETRAINED[name])
+    return commands.train_command(
+        out / "data" / TRAIN_DATA,
+        pretrained_dir(out, name),
+        flags,
+        MINI.steps,
+        MINI.batch_size,
+        seed=TRAIN_SEED,
+    )
+
+
+def finetune(out: Path, hypothesis: str) -> list[str]:
+    pretrained, steps, lr = HYPOTHESES[hypothesis]
+    flags = [f"--policy.path={pretrained_dir(out, pretrained) / CHECKPOINT}", "--policy.device=cpu"]
+    flags += ["--policy.push_to_hub=false", *(flag for flag, _ in finetune_flags("omnid", MINI))]
+    if lr is not None:
+        flags.append(f"--policy.optimizer_lr={lr:g}")
+    return commands.train_command(
+        out / "data" / FEWSHOT_DATA,
+        finetuned_dir(out, hypothesis),
+        flags,
+        steps,
+        MINI.batch_size,
+        seed=TRAIN_SEED,
+    )
+
+
+def evaluate(out: Path, checkpoint: Path, model: str) -> list[str]:
+    """Camera A only, ID, the validation seeds; its calibration read from the env's every frame."""
+    extra = [
+        f"--env.episode_length={MINI.episode_length}",
+        "--env.per_frame_calibration=true",
+        "--policy.cameras=" + commands.json_list(CAMERA_A),
+        "--policy.frame_calibration=" + commands.json_list([image_key(c) for c in CAMERA_A]),
+    ]
+    return commands.eval_command(
+        checkpoint,
+        validation_dir(out, model),
+        TASK0,
+        "id",
+        CAMERA_A,
+        MINI.image_size,
+        VALIDATION_EPISODES,
+        "cpu",
+        seed=VALIDATION_SEED,
+        extra=extra,
+        batch_size=min(MINI.eval_batch_size, VALIDATION_EPISODES),
+    )
+
+
+def protocol(out: Path) -> list[Run]:
+    """Record, pre-train, validate zero-shot, fine-tune per hypothesis, validate."""
+    runs = records(out)
+    for name in PRETRAINED:
+        folder = pretrained_dir(out, name)
+        trained = Run(
+            str(folder.relative_to(out)), "train", tuple(pretrain(out, name)), folder, (runs[0].name,)
+        )
+        runs.append(trained)
+        model = f"zero_shot_{name}"
+        cmd = evaluate(out, pretrained_dir(out, name) / CHECKPOINT, model)
+        runs.append(
+            Run(f"validation/{model}", "eval", tuple(cmd), validation_dir(out, model), (trained.name,))
+        )
+    for hypothesis, (pretrained, _, _) in HYPOTHESES.items():
+        name = str(finetuned_dir(out, hypothesis).relative_to(out))
+        needs = (str(pretrained_dir(out, pretrained).relative_to(out)), runs[1].name)
+        runs.append(
+            Run(name, "train", tuple(finetune(out, hypothesis)), finetuned_dir(out, hypothesis), needs)
+        )
+        cmd = evaluate(out, finetuned_dir(out, hypothesis) / CHECKPOINT, hypothesis)
+        runs.append(
+            Run(f"validation/{hypothesis}", "eval", tuple(cmd), validation_dir(out, hypothesis), (name,))
+        )
+    return plan(runs, out)
+
+
+def select(results: dict[str, tuple[int, int]]) -> str:
+    """The protocol's rule: the most validation successes; within ``TIE_MARGIN`` of the most, the fewest
+    fine-tuning steps, then the order of ``HYPOTHESES``."""
+    best = max(results[h][0] for h in HYPOTHESES)
+    close = [h for h in HYPOTHESES if results[h][0] >= best - TIE_MARGIN]
+    return min(close, key=lambda h: HYPOTHESES[h][1])
+
+
+def summarise(out: Path, runs: Sequence[Run]) -> dict:
+    done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
+    models = [f"zero_shot_{name}" for name in PRETRAINED] + list(HYPOTHESES)
+    results = {
+        model: {
+            "successes": counts[0],
+            "episodes": counts[1],
+            "commit": stamp_commit(done[validation_dir(out, model)]),
+        }
+        for model in models
+        if validation_dir(out, model) in done
+        for counts in [read_eval_info(validation_dir(out, model) / "eval_info.json")]
+    }
+    validated = {h: (results[h]["successes"], results[h]["episodes"]) for h in HYPOTHESES if h in results}
+    return {
+        "task": TASK0,
+        "validation_seed": VALIDATION_SEED,
+        "validation_episodes": VALIDATION_EPISODES,
+        "hypotheses": {h: {"pretrained": p, "steps": s, "lr": lr} for h, (p, s, lr) in HYPOTHESES.items()},
+        "results": results,
+        "selected": select(validated) if len(validated) == len(HYPOTHESES) else None,
+    }
+
+
+def write_report(summary: dict, path: Path) -> None:
+    """``report.md``: each model's validation success on camera A, and the selection."""
+    first = summary["validation_seed"]
+    lines = [
+        f"# A new camera from ten episodes: validation ({summary['task']}, camera A)",
+        "",
+        f"Env seeds {first}-{first + summary['validation_episodes'] - 1}, camera A only. Rule: the most "
+        f"successes; within {TIE_MARGIN} of the most, the fewest fine-tuning steps.",
+        "",
+        "| model | pre-trained | fine-tuning | validation success (Wilson 95 %) | selected |",
+        "|---|---|---|---|---|",
+    ]
+    for model, result in summary["results"].items():
+        est = wilson_interval(result["successes"], result["episodes"])
+        hypothesis = summary["hypotheses"].get(model)
+        if hypothesis:
+            lr = "mini's lr" if hypothesis["lr"] is None else f"lr {hypothesis['lr']:g}"
+            pretrained, tuning = hypothesis["pretrained"], f"{hypothesis['steps']} steps, {lr}"
+        else:
+            pretrained, tuning = model.removeprefix("zero_shot_"), "none (zero-shot)"
+        chosen = "**yes**" if model == summary["selected"] else ""
+        lines.append(
+            f"| {model} | {pretrained} | {tuning} | {result['successes']}/{result['episodes']} "
+            f"({100 * est.low:.1f}-{100 * est.high:.1f} %) | {chosen} |"
+        )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, default=Path("outputs/new_camera"))
+    add_protocol_options(parser)
+    args = parser.parse_args(argv)
+    out = args.out.resolve()
+    if report_from_summary(parser, args, out, write_report):
+        return 0
+    runs = protocol(out)
+    if args.dry_run:
+        print("\n".join(describe_plan(runs)))
+        return 0
+
+    def write_outputs(_: Run | None = None) -> None:
+        summary = summarise(out, runs)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        if summary["selected"] and not (out / SELECTION_FILE).is_file():
+            selection = {"selected": summary["selected"], "rule": select.__doc__, "commit": code_commit()}
+            (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
+        write_report(summary, out / "report.md")
+
+    if not args.report_only:
+        execute(
+            runs, out, commit=code_commit(), desc="new camera", on_done=write_outputs, stop_on_failure=True
+        )
+    write_outputs()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,125 @@
+"""The new-camera protocol: its data and the mini pre-training are the benchmark's own runs, the hypotheses
+differ only where they say, validation touches no other seed set and sees camera A alone, and the rule and
+the report work from the validation counts alone."""
+
+import dataclasses
+import json
+
+import pytest
+
+from lerobot_omnid.benchmark import new_camera as nc
+from lerobot_omnid.benchmark import task_sizing
+from lerobot_omnid.benchmark.plan import (
+    EVAL_SEED_STRIDE,
+    FEWSHOT_SEED,
+    HELDOUT_SEED,
+    PROFILES,
+    TASK0,
+    build_plan,
+)
+from lerobot_omnid.benchmark.readout_selection import VALIDATION_HELDOUT_SEED, VALIDATION_SEED
+from lerobot_omnid.diagnostics.position_extrapolation import PROBE_SEED
+from lerobot_omnid.measure import engine
+
+
+def options(cmd: tuple[str, ...]) -> dict[str, str]:
+    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
+
+
+def test_data_and_mini_pretraining_are_the_benchmarks_own_runs(tmp_path):
+    fewshot = dataclasses.replace(PROFILES["mini-fewshot"], methods=("omnid",))
+    expected = {r.name: r.cmd for r in build_plan(fewshot, tmp_path, (TASK0,))}
+    runs = {r.name: r.cmd for r in nc.protocol(tmp_path)}
+    for name in ("record/select_apple_bcde", "record/select_apple_a_fewshot", "train/omnid/select_apple"):
+        assert runs[name] == expected[name], name
+    # The paper's hypothesis is the benchmark's fine-tuning, in a folder of its own.
+    paper, benchmark = (
+        options(runs["finetune_validation/paper"]),
+        options(expected["finetune/omnid/select_apple"]),
+    )
+    assert {k: v for k, v in paper.items() if k != "--output_dir"} == {
+        k: v for k, v in benchmark.items() if k != "--output_dir"
+    }
+
+
+def test_hypotheses_differ_only_where_they_say(tmp_path):
+    runs = {r.name: options(r.cmd) for r in nc.protocol(tmp_path)}
+    mini, single = runs["train/omnid/select_apple"], runs["train_single_camera/omnid/select_apple"]
+    assert set(single.items()) - set(mini.items()) == {
+        ("--policy.single_camera_rate", "0.5"),
+        ("--output_dir", str(tmp_path / "train_single_camera" / "omnid" / TASK0)),
+    }
+    long, low = runs["finetune_validation/long"], runs["finetune_validation/long_low_lr"]
+    assert long["--steps"] == low["--steps"] == "1000" and low["--policy.optimizer_lr"] == "0.0001"
+    assert "--policy.optimizer_lr" not in long
+    single_long = runs["finetune_validation/single_camera_long"]
+    assert single_long["--policy.path"].startswith(str(tmp_path / "train_single_camera"))
+
+
+def test_validation_sees_camera_a_alone_on_seeds_of_its_own(tmp_path):
+    evals = [options(r.cmd) for r in nc.protocol(tmp_path) if r.kind == "eval"]
+    assert len(evals) == len(nc.PRETRAINED) + len(nc.HYPOTHESES)
+    for opts in evals:
+        assert opts["--env.cameras"] == "[cam_a]" and opts["--policy.cameras"] == '["cam_a"]'
+        assert opts["--env.per_frame_calibration"] == "true" and opts["--seed"] == str(nc.VALIDATION_SEED)
+    first, last = nc.VALIDATION_SEED, nc.VALIDATION_SEED + nc.VALIDATION_EPISODES - 1
+    used = [(0, 999), (FEWSHOT_SEED, FEWSHOT_SEED + 999), (HELDOUT_SEED, HELDOUT_SEED + 999)]
+    used += [(k * EVAL_SEED_STRIDE, k * EVAL_SEED_STRIDE + 99) for k in range(1, 50)]
+    used += [
+        (s, s + 999)
+        for s in (VALIDATION_SEED, VALIDATION_HELDOUT_SEED, PROBE_SEED, task_sizing.VALIDATION_SEED)
+    ]
+    assert all(last < low or first > high for low, high in used)
+
+
+@pytest.mark.parametrize(
+    ("successes", "selected"),
+    [
+        (
+            {"paper": 3, "long": 9, "long_low_lr": 4, "single_camera_long": 10},
+            "long",
+        ),  # within 1: fewer steps, order
+        ({"paper": 9, "long": 10, "long_low_lr": 4, "single_camera_long": 2}, "paper"),  # fewer steps
+        ({"paper": 0, "long": 2, "long_low_lr": 2, "single_camera_long": 8}, "single_camera_long"),
+    ],
+)
+def test_rule_takes_the_most_successes_then_the_shortest_fine_tuning(successes, selected):
+    assert nc.select({h: (s, 20) for h, s in successes.items()}) == selected
+
+
+def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
+    results = {"zero_shot_mini": (1, 20), "paper": (3, 20), "long": (7, 20)}
+    summary = {
+        "task": TASK0,
+        "validation_seed": nc.VALIDATION_SEED,
+        "validation_episodes": nc.VALIDATION_EPISODES,
+        "hypotheses": {h: {"pretrained": p, "steps": s, "lr": lr} for h, (p, s, lr) in nc.HYPOTHESES.items()},
+        "results": {m: {"successes": s, "episodes": n, "commit": "abc"} for m, (s, n) in results.items()},
+        "selected": None,
+    }
+    source = tmp_path / "summary.json"
+    source.write_text(json.dumps(summary))
+    assert nc.main(["--out", str(tmp_path / "out"), "--report-only", "--summary", str(source)]) == 0
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "| zero_shot_mini | mini | none (zero-shot) | 1/20 (0.9-23.6 %) |  |" in report
+    assert "| long | mini | 1000 steps, mini's lr | 7/20 (18.1-56.7 %) |  |" in report
+
+
+def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
+    runs = nc.protocol(tmp_path)
+    counts = {"paper": 2, "long": 8, "long_low_lr": 5, "single_camera_long": 7}
+    for run in runs:
+        hypothesis = run.name.removeprefix("validation/")
+        if run.kind != "eval" or hypothesis not in counts:
+            continue
+        run.output.mkdir(parents=True)
+        overall = {"pc_success": 100 * counts[hypothesis] / 20, "n_episodes": 20}
+        (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
+        engine.write_stamp(run, "abc", 1.0)
+        summary = nc.summarise(tmp_path, runs)
+        assert summary["results"][hypothesis] == {
+            "successes": counts[hypothesis],
+            "episodes": 20,
+            "commit": "abc",
+        }
+        assert summary["selected"] == ("long" if len(summary["results"]) == len(counts) else None)
