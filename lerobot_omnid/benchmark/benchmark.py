@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 from pathlib import Path
 
@@ -107,6 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="other benchmark folders or summary files (their summary.json, e.g. copied under docs/results/) "
         "whose evaluations the report combines with this folder's",
     )
+    parser.add_argument(
+        "--task-steps",
+        type=Path,
+        metavar="SIZING",
+        help="training steps per task: a task sizing's sizing.json (python -m lerobot_omnid.benchmark."
+        "task_sizing); tasks it does not name keep the profile's steps",
+    )
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser
 
@@ -125,6 +133,14 @@ def resolve_profile(parser: argparse.ArgumentParser, args: argparse.Namespace) -
     for name in ("device", "methods", "tasks", "settings", "eval_seeds", "train_seeds", "control_settings"):
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
+    if args.task_steps:
+        sizing = json.loads(args.task_steps.read_text())
+        unsized = {task: steps for task, steps in sizing.items() if not isinstance(steps, int) or steps < 1}
+        if unsized:
+            parser.error(
+                f"--task-steps: expected positive step counts per task, got {unsized} in {args.task_steps}"
+            )
+        changes["task_steps"] = tuple(sizing.items())
     if "omnid" not in changes.get("methods", p.methods):
         changes["ablations"] = False  # OmniD's ablations are compared with OmniD itself
     return dataclasses.replace(p, **changes)

@@ -51,6 +51,12 @@ BANDS_CM = {band: (100 * low, 100 * high) for band, (low, high) in POSITION_BAND
 """The graded position bands: distance outside the training square, cm."""
 
 
+def steps_text(p: BenchmarkProfile) -> str:
+    """The training steps: the profile's, with the tasks sized otherwise (``task_steps``) named."""
+    sized = ", ".join(f"{task} {steps}" for task, steps in p.task_steps if steps != p.steps)
+    return f"{p.steps} ({sized})" if sized else str(p.steps)
+
+
 def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
     """What is run and how, with every non-default option and its reason."""
     evals = ", ".join(f"{k} (env seeds {k * EVAL_SEED_STRIDE}+)" for k in p.eval_seeds)
@@ -63,7 +69,7 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         f"tasks {', '.join(tasks)}; {', '.join(parts)}.",
         "",
         f"- Same for every method: datasets of {p.episodes} expert episodes per task (cameras B-E, "
-        f"{p.image_size}x{p.image_size} px, env seeds from 0), {p.steps} training steps, "
+        f"{p.image_size}x{p.image_size} px, env seeds from 0), {steps_text(p)} training steps, "
         f"batch {p.batch_size}; evaluation: {p.eval_episodes} episodes per setting and eval seed, eval seeds "
         f"{evals}, at most {p.episode_length} env steps (10 per second), {p.eval_batch_size} envs at once "
         "(`--eval.batch_size`; episode i keeps env seed start + i).",

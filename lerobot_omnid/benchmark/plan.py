@@ -91,6 +91,12 @@ class BenchmarkProfile:
     num_workers: int
     small: bool  # CPU-sized models and a short-run optimiser schedule
     fuse_last_step_only: bool = False  # OmniD encodes only the last observation step (cheaper steps)
+    task_steps: tuple[tuple[str, int], ...] = ()  # (task, training steps) where not ``steps``: task sizing
+
+    def for_task(self, task: str) -> BenchmarkProfile:
+        """This profile with ``task``'s training steps (``task_steps``), which size every method's run on
+        it (VQ-BeT's tokeniser phase too)."""
+        return dataclasses.replace(self, steps=dict(self.task_steps).get(task, self.steps))
 
 
 # mini uses 64 px images: ResNet-18 forward+backward on a batch's 64 images takes 2.7 s at 96 px on some
@@ -312,9 +318,10 @@ def plan_models(
         return [f"--policy.type={method}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
 
     for task in tasks:
+        sized = p.for_task(task)
         for method in p.methods:
-            flags = [f for f, _ in method_flags(method, p)]
-            trained = train("train", method, task, f"{task}_bcde", [*common(method), *flags], p.steps)
+            flags = [f for f, _ in method_flags(method, sized)]
+            trained = train("train", method, task, f"{task}_bcde", [*common(method), *flags], sized.steps)
             cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
             evaluate(trained, method, task, p.settings if task == TASK0 else ("id",), cameras)
             if task == TASK0:
@@ -323,9 +330,10 @@ def plan_models(
                 offline(trained, method, task, heldout_settings(p, tasks))
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
-            flags = [f for f, _ in ablation_flags(name, p)]
+            sized = p.for_task(TASK0)
+            flags = [f for f, _ in ablation_flags(name, sized)]
             dataset = f"{TASK0}_a" if name == "omnid_cam_a" else f"{TASK0}_bcde"
-            trained = train("train", name, TASK0, dataset, [*common("omnid"), *flags], p.steps)
+            trained = train("train", name, TASK0, dataset, [*common("omnid"), *flags], sized.steps)
             evaluate(trained, name, TASK0, ("id",), CAMERA_A if name == "omnid_cam_a" else TRAIN_CAMERAS)
     for method in p.methods:
         start = root / "train" / method / TASK0 / CHECKPOINT_SUBDIR

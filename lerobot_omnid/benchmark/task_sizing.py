@@ -16,7 +16,7 @@ The protocol (docs/benchmark.md#sizing-the-six-tasks), fixed before any of its r
 4. *Rule* (:func:`size`): a task's budget is the first whose validation success reaches ``THRESHOLD``; a
    task below it at every budget is "not learned within the last budget" and stays in the table as
    measured. The budgets are written to ``sizing.json``; the six-task benchmark trains every method for
-   its task's budget.
+   its task's budget (``omnid-benchmark --task-steps sizing.json``).
 
 Runs on the experiment engine (resumable; ``--dry-run`` prints every command; the next budget of a task is
 planned once its validation is done; ``--also`` takes committed summaries of earlier sessions, whose
@@ -270,13 +270,19 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def write_outputs(out: Path, runs: Sequence[Run], tasks: Sequence[str], known: Known) -> None:
-    """``summary.json``, ``sizing.json`` (each task's budget) and ``report.md`` from the runs done and the
-    ``known`` counts."""
+    """``summary.json``, ``sizing.json`` (each decided task's training steps) and ``report.md`` from the
+    runs done and the ``known`` counts."""
     summary = summarise(out, runs, tasks, known)
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    budgets = {task: result["budget"] for task, result in summary["tasks"].items()}
-    (out / SIZING_FILE).write_text(json.dumps(budgets, indent=2) + "\n")
+    # What the six-task benchmark trains for (`omnid-benchmark --task-steps`): a task not learned within
+    # the last budget is measured at that budget; a task still pending has no entry yet.
+    steps = {
+        task: BUDGETS[-1] if result["budget"] is None else result["budget"]
+        for task, result in summary["tasks"].items()
+        if result["budget"] != "pending"
+    }
+    (out / SIZING_FILE).write_text(json.dumps(steps, indent=2) + "\n")
     write_report(summary, out / "report.md")
 
 

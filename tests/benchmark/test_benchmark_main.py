@@ -361,9 +361,16 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
         (["--eval-seeds", "1,x"], ["--eval-seeds", "1,x"]),
         (["--profile", "huge"], ["--profile", "huge", "mini"]),
         (["--dry-run", "--report-only"], ["--dry-run", "--report-only"]),
+        (
+            ["--task-steps", "SIZING"],
+            ["--task-steps: expected positive step counts", "'get_coffee': 'pending'"],
+        ),
     ],
 )
 def test_bad_arguments_are_named(argv, expected, tmp_path, capsys):
+    sizing = tmp_path / "sizing.json"
+    sizing.write_text(json.dumps({"select_apple": 1000, "get_coffee": "pending"}))
+    argv = [str(sizing) if a == "SIZING" else a for a in argv]
     with pytest.raises(SystemExit) as exit_info:
         bench.main([*argv, "--out", str(tmp_path / "b")])
     assert exit_info.value.code == 2
@@ -371,3 +378,11 @@ def test_bad_arguments_are_named(argv, expected, tmp_path, capsys):
     for text in expected:
         assert text in err
     assert not (tmp_path / "b").exists()
+
+
+def test_task_steps_come_from_a_sizing_file(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")  # git runs in a subprocess
+    sizing = tmp_path / "sizing.json"
+    sizing.write_text(json.dumps({"select_apple": 3000}))
+    assert bench.main(["--task-steps", str(sizing), "--out", str(tmp_path / "b"), "--dry-run"]) == 0
+    assert capsys.readouterr().out.count("--steps=3000 ") == 2  # OmniD and DP on select_apple

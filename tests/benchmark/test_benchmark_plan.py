@@ -283,3 +283,15 @@ def test_mini_fewshot_profile_fine_tunes_minis_own_task0_models(tmp_path):
     prepare = list(fewshot["prepare/diffusion/cam_a"].cmd)
     assert prepare[prepare.index("--src") + 1] == str(tmp_path / "train" / "diffusion" / TASK0 / CHECKPOINT)
     assert not any(n.startswith(("offline/", "record/select_apple_bcde_heldout")) for n in fewshot)
+
+
+def test_task_steps_size_every_method_on_that_task_only(tmp_path):
+    """A sized task trains every method for its steps (VQ-BeT's tokeniser phase with them); the others keep
+    the profile's, so their runs are the unsized plan's."""
+    p = dataclasses.replace(PROFILES["mini"], methods=METHODS, task_steps=(("get_coffee", 3000),))
+    runs = by_name(build_plan(p, tmp_path, (TASK0, "get_coffee")))
+    unsized = by_name(build_plan(dataclasses.replace(p, task_steps=()), tmp_path, (TASK0, "get_coffee")))
+    for method in METHODS:
+        assert flag(runs[f"train/{method}/get_coffee"].cmd, "steps") == "3000"
+        assert runs[f"train/{method}/{TASK0}"].cmd == unsized[f"train/{method}/{TASK0}"].cmd
+    assert flag(runs["train/vqbet/get_coffee"].cmd, "policy.n_vqvae_training_steps") == "600"
