@@ -189,18 +189,18 @@ def select(results: dict[str, tuple[int, int]]) -> str:
 
 
 def summarise(out: Path, runs: Sequence[Run]) -> dict:
+    """Each model's validation counts and the commit that made them (of the runs done for this plan), and
+    the selection once every hypothesis is validated."""
     done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    models = [f"zero_shot_{name}" for name in PRETRAINED] + list(HYPOTHESES)
-    results = {
-        model: {
-            "successes": counts[0],
-            "episodes": counts[1],
-            "commit": stamp_commit(done[validation_dir(out, model)]),
-        }
-        for model in models
-        if validation_dir(out, model) in done
-        for counts in [read_eval_info(validation_dir(out, model) / "eval_info.json")]
-    }
+    results = {}
+    for model in [f"zero_shot_{name}" for name in PRETRAINED] + list(HYPOTHESES):
+        if (folder := validation_dir(out, model)) in done:
+            successes, episodes = read_eval_info(folder / "eval_info.json")
+            results[model] = {
+                "successes": successes,
+                "episodes": episodes,
+                "commit": stamp_commit(done[folder]),
+            }
     validated = {h: (results[h]["successes"], results[h]["episodes"]) for h in HYPOTHESES if h in results}
     return {
         "task": TASK0,
