@@ -40,11 +40,9 @@ from lerobot_omnid.cli import add_protocol_options, report_from_summary
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
-    code_commit,
-    describe_plan,
-    execute,
     is_done,
     plan,
+    run_protocol,
     stamp_commit,
 )
 from lerobot_omnid.measure.results import read_eval_info
@@ -251,21 +249,14 @@ def main(argv: list[str] | None = None) -> int:
     if unknown := [m for m in models if m not in MODELS]:
         parser.error(f"--models: expected names from {','.join(MODELS)}, got {','.join(unknown)}")
     runs = protocol(out, tasks, models)
-    if args.dry_run:
-        print("\n".join(describe_plan(runs)))
-        return 0
 
-    def write_outputs(_: Run | None = None) -> None:
+    def write_outputs() -> None:
         summary = summarise(out, runs)
         out.mkdir(parents=True, exist_ok=True)
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         write_report(summary, out / "report.md")
 
-    if not args.report_only:
-        execute(
-            runs, out, commit=code_commit(), desc="metaworld", on_done=write_outputs, stop_on_failure=True
-        )
-    write_outputs()
+    run_protocol(runs, out, "metaworld", write_outputs, args.dry_run, args.report_only)
     return 0
 
 

@@ -47,10 +47,9 @@ from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
     code_commit,
-    describe_plan,
-    execute,
     is_done,
     plan,
+    run_protocol,
     stamp_commit,
 )
 from lerobot_omnid.measure.results import read_eval_info
@@ -253,11 +252,8 @@ def main(argv: list[str] | None = None) -> int:
     if report_from_summary(parser, args, out, write_report):
         return 0
     runs = protocol(out)
-    if args.dry_run:
-        print("\n".join(describe_plan(runs)))
-        return 0
 
-    def write_outputs(_: Run | None = None) -> None:
+    def write_outputs() -> None:
         summary = summarise(out, runs)
         out.mkdir(parents=True, exist_ok=True)
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -266,11 +262,7 @@ def main(argv: list[str] | None = None) -> int:
             (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
         write_report(summary, out / "report.md")
 
-    if not args.report_only:
-        execute(
-            runs, out, commit=code_commit(), desc="new camera", on_done=write_outputs, stop_on_failure=True
-        )
-    write_outputs()
+    run_protocol(runs, out, "new camera", write_outputs, args.dry_run, args.report_only)
     return 0
 
 

@@ -265,6 +265,32 @@ def execute(
     return status, seconds
 
 
+def run_protocol(
+    runs: Sequence[Run],
+    out: Path,
+    desc: str,
+    write_outputs: Callable[[], object],
+    dry_run: bool = False,
+    report_only: bool = False,
+) -> None:
+    """What a protocol command does with its plan: ``dry_run`` prints it; otherwise it runs what is not
+    done (unless ``report_only``; stopping at the first failure) with ``write_outputs()`` (its summary and
+    report) after each finished run, and once more at the end."""
+    if dry_run:
+        print("\n".join(describe_plan(runs)))
+        return
+    if not report_only:
+        execute(
+            runs,
+            out,
+            commit=code_commit(),
+            desc=desc,
+            on_done=lambda _: write_outputs(),
+            stop_on_failure=True,
+        )
+    write_outputs()
+
+
 def write_stamp(run: Run, commit: str | None, seconds: float) -> None:
     if run.stamp is None:
         raise RuntimeError(f"{run.name}: not planned (engine.plan gives runs their stamps)")

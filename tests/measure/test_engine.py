@@ -3,6 +3,7 @@ below the planned inputs. (Running plans with tiny Python commands as the tools:
 tests/e2e/test_engine_runs.py.)"""
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 from omnid_testing import by_name, evaluation
@@ -43,3 +44,30 @@ def test_a_run_is_done_only_when_made_by_the_planned_command(tmp_path):
     assert engine.state(other[train.name]) == "stale" and engine.state(other[offline.name]) == "stale"
     other = by_name(build_plan(dataclasses.replace(PROFILES["mini"], episodes=2), tmp_path, (TASK0,)))
     assert other[train.name].cmd == train.cmd and engine.state(other[train.name]) == "stale"
+
+
+def test_run_protocol_writes_the_outputs_after_each_run_and_never_on_a_dry_run(tmp_path, monkeypatch, capsys):
+    """A protocol command's plan: a dry run prints it and writes nothing; a run writes its summary after
+    every finished run and at the end; report-only runs nothing and writes it once."""
+    runs = plan(
+        [Run(name, "eval", ("tool", str(tmp_path / name)), tmp_path / name) for name in "ab"], tmp_path
+    )
+
+    def tool(cmd, log, on_line=None):
+        (Path(cmd[1])).mkdir(parents=True)
+        (Path(cmd[1]) / "eval_info.json").write_text('{"overall": {"pc_success": 0, "n_episodes": 1}}')
+        return 0
+
+    monkeypatch.setattr(engine, "run_logged", tool)
+    monkeypatch.setattr(engine, "code_commit", lambda: "abc")  # git runs in a subprocess
+    written: list[int] = []
+
+    def write_outputs() -> None:
+        written.append(sum(is_done(r) for r in runs))
+
+    engine.run_protocol(runs, tmp_path, "test", write_outputs, dry_run=True)
+    assert written == [] and "[1/2] a (to run)" in capsys.readouterr().out
+    engine.run_protocol(runs, tmp_path, "test", write_outputs, report_only=True)
+    assert written == [0]
+    engine.run_protocol(runs, tmp_path, "test", write_outputs)
+    assert written == [0, 1, 2, 2]
