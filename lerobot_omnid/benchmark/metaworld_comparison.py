@@ -45,6 +45,7 @@ from lerobot_omnid.measure.engine import (
     run_protocol,
     stamp_commit,
 )
+from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 
@@ -226,9 +227,7 @@ def write_report(summary: dict, path: Path) -> None:
         for a, b in COMPARED:
             if (ca := pooled(a, task)) and (cb := pooled(b, task)):
                 lines.append(f"| {task} | {a} vs {b} | {fisher_exact(*ca, *cb):.3g} |")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(lines, path)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -52,6 +52,7 @@ from lerobot_omnid.measure.engine import (
     run_protocol,
     stamp_commit,
 )
+from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import wilson_interval
 
@@ -236,9 +237,7 @@ def write_report(summary: dict, path: Path) -> None:
             f"| {model} | {pretrained} | {tuning} | {result['successes']}/{result['episodes']} "
             f"({100 * est.low:.1f}-{100 * est.high:.1f} %) | {chosen} |"
         )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(lines, path)
 
 
 def main(argv: list[str] | None = None) -> int:

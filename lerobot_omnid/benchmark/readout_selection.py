@@ -48,6 +48,7 @@ from lerobot_omnid.benchmark.plan import (
 )
 from lerobot_omnid.cli import add_protocol_options, report_from_summary
 from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
+from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
@@ -319,9 +320,7 @@ def write_report(summary: dict, path: Path) -> None:
             cells = [[sum(test[r][o][i] for o in BACKGROUND_OODS) for i in (0, 1)] for r in test]
             p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 else ""
             lines.append("| unseen tables, pooled | " + " | ".join(map(count_text, cells)) + f" | {p} |")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(lines, path)
 
 
 def main(argv: list[str] | None = None) -> None:

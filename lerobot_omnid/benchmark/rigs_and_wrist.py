@@ -46,6 +46,7 @@ from lerobot_omnid.measure.engine import (
     plan,
     stamp_commit,
 )
+from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference, wilson_interval
 
@@ -215,9 +216,7 @@ def write_report(summary: dict, path: Path) -> None:
         rigs = " + ".join(UNSEEN_RIGS)
         counted = f"{sa}/{na} | {sb}/{nb} | {p:.3g}"
         lines.append(f"| rigs: {a} vs {b}, pooled ({difference}) | {rigs} | id | {counted} |")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(lines, path)
 
 
 def protocol(out: Path, checkpoints: dict[str, Path], given: dict[str, Path], episodes: int) -> list[Run]:

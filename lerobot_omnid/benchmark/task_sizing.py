@@ -49,6 +49,7 @@ from lerobot_omnid.measure.engine import (
     plan,
     stamp_commit,
 )
+from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import read_eval_info
 from lerobot_omnid.measure.stats import wilson_interval
 
@@ -215,9 +216,7 @@ def write_report(summary: dict, path: Path) -> None:
         budget = result["budget"]
         chosen = f"not learned within {budgets[-1]} steps" if budget is None else str(budget)
         lines.append(f"| {task} | " + " | ".join(cells) + f" | {chosen} |")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(lines, path)
 
 
 def main(argv: list[str] | None = None) -> int:

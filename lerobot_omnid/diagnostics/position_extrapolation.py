@@ -46,6 +46,7 @@ from lerobot_omnid.benchmark.commands import record_command, recorded_episodes
 from lerobot_omnid.benchmark.plan import TASK0
 from lerobot_omnid.diagnostics.offline_eval import GRIPPER, POSITION, load_policy
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX
+from lerobot_omnid.measure.report import write_markdown
 
 FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest): the object is unmoved
 PROBE_SEED = 400_000  # first env seed of the probe's recordings
@@ -257,9 +258,7 @@ def write_report(results: dict[str, dict], path: Path) -> None:
         for t in tables:
             shifts = [f"{results[n]['sets'][t].get('table_shift', float('nan')):.2f}" for n in names]
             lines.append(f"| {t} | " + " | ".join(shifts) + " |")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_markdown(lines, path)
 
 
 if __name__ == "__main__":

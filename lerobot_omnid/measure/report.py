@@ -22,6 +22,13 @@ Cell = CellResult | None
 """A table cell: a result, or None where nothing was evaluated (yet)."""
 
 
+def write_markdown(lines: Sequence[str], path: Path) -> None:
+    """Write a report's ``lines`` to ``path`` (creating its folder) and print them."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
 def task_title(task: str) -> str:
     return task.replace("_", " ").title()
 
