@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         metavar="SIZING",
         help="training steps per task: a task sizing's sizing.json (python -m lerobot_omnid.benchmark."
-        "task_sizing); tasks it does not name keep the profile's steps",
+        "task_sizing), naming every planned task",
     )
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser
@@ -153,6 +153,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--dry-run and --report-only: expected at most one of them, got both")
     p = resolve_profile(parser, args)
     tasks = p.tasks or available_tasks()
+    if args.task_steps and (unsized := [t for t in tasks if t not in dict(p.task_steps)]):
+        parser.error(
+            f"--task-steps: expected a step count for every planned task, got none for {unsized} in "
+            f"{args.task_steps} (a task still being sized: plan the others with --tasks)"
+        )
     out = (args.out or Path(f"outputs/benchmark_{p.name}")).resolve()
     for path in args.also:  # before running anything: a summary that cannot be combined is an error now
         try:

@@ -43,7 +43,8 @@ from lerobot_omnid.benchmark.plan import (
     heldout_settings,
     seed_folder,
 )
-from lerobot_omnid.measure import charts, report, results
+from lerobot_omnid.measure import across_tasks, charts, report, results
+from lerobot_omnid.measure.across_tasks import ALPHA, NOT_ABOVE_BLIND
 from lerobot_omnid.measure.engine import Run, is_done, stamp_commit
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
@@ -60,7 +61,8 @@ def steps_text(p: BenchmarkProfile) -> str:
 def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
     """What is run and how, with every non-default option and its reason."""
     evals = ", ".join(f"{k} (env seeds {k * EVAL_SEED_STRIDE}+)" for k in p.eval_seeds)
-    parts = [f"{TASK0} settings {', '.join(p.settings)}"]
+    where = "every task" if p.every_task else TASK0
+    parts = [f"settings {', '.join(p.settings)} on {where}"]
     parts += ["few-shot on camera A"] if p.fewshot else []
     parts += ["ablations"] if p.ablations else []
     folders = ", ".join(f"{s} (runs in `./{seed_folder(Path(), s)[1]}`)" for s in p.train_seeds)
@@ -75,10 +77,11 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         "(`--eval.batch_size`; episode i keeps env seed start + i).",
         "- Training seeds (the `--seed` of every `lerobot-train`, each a full repetition of the training "
         f"runs and their evaluations on the same datasets and env seeds): {folders}.",
-        f"- Controls on {TASK0}, the same checkpoint evaluated in the settings "
-        f"{', '.join(p.control_settings) or '(none)'}: blind (only the state can drive it) for every method, "
-        "scrambled geometry (the cameras' calibrations permuted) for OmniD; a background OOD's blind control "
-        "is the ID one's (same env seeds and layouts; a blind policy sees no table).",
+        f"- Controls on {where}, the same checkpoint evaluated in the settings "
+        f"{', '.join(p.control_settings) or '(none)'}: blind (only the state can drive it) for every method"
+        + "".join(f", {CONTROL_LABELS[c]} for OmniD" for c in p.controls if c != "blind")
+        + "; a background OOD's blind control is the ID one's (same env seeds and layouts; a blind policy "
+        "sees no table).",
         "- Position-shift curve: the graded bands "
         + ", ".join(f"`{b}` ({low:g}-{high:g} cm)" for b, (low, high) in BANDS_CM.items() if b in p.settings)
         + " outside the training square, L-inf; same success rule."
@@ -149,7 +152,7 @@ def comparison_lines(
     records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str]
 ) -> list[str]:
     """OmniD against every other method, cell by cell, with Fisher tests (pooled and per training seed)."""
-    cells = [(t, "id") for t in tasks if t != TASK0]
+    cells = [(t, s) for t in tasks if t != TASK0 for s in SETTINGS]
     cells = [(TASK0, s) for s in SETTINGS] + cells + [(TASK0, FEWSHOT), (TASK1, FEWSHOT)]
     others = [m for m in methods if m != "omnid"]
     return [
@@ -172,6 +175,30 @@ def fewshot_control_lines(records: Sequence[results.EvalRecord], methods: Sequen
         lines += report.controls_table(
             records, methods, task, (FEWSHOT,), {(FEWSHOT, "blind"): FEWSHOT}, LABELS, {"blind": "blind"}
         )
+    return lines
+
+
+def every_task_lines(
+    p: BenchmarkProfile, records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str]
+) -> list[str]:
+    """Every task with every method beside its controls and per range of env seeds; OmniD against each
+    method over the tasks."""
+    unseen = next((s for s in p.settings if s in BACKGROUND_OODS), None)
+    lines = [
+        "",
+        "## Every task: each method beside its controls, each range of env seeds",
+        "",
+        f"Success pooled over the ranges (Wilson 95 %), then each range alone (eval seed k: env seeds "
+        f"{EVAL_SEED_STRIDE}k, ...); the controls of the same checkpoint in the same setting; "
+        f"{NOT_ABOVE_BLIND}: not above its blind control (higher with Fisher p < {ALPHA:g}); the difference "
+        "to OmniD with Newcombe's interval and the two-sided Fisher p (pooled rows: Mantel-Haenszel, "
+        "stratified by task).",
+        "",
+        *across_tasks.task_table(records, methods, tasks, LABELS, setting="id", unseen=unseen),
+    ]
+    if "omnid" in methods and len(methods) > 1 and len(tasks) > 1:
+        lines += ["", "## OmniD against each method over the tasks", ""]
+        lines += across_tasks.pooled_comparison(records, methods, tasks, LABELS)
     return lines
 
 
@@ -247,6 +274,8 @@ def write_outputs(
         ]
     lines += ["## ID success rate (%) per task, cameras B-E", ""]
     lines += report.id_table(cells, methods, tasks, LABELS)
+    if p.every_task:
+        lines += every_task_lines(p, records, methods, tasks)
     if TASK0 in tasks:
         lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
         lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, LABELS)

@@ -31,6 +31,7 @@ from lerobot_omnid.benchmark.commands import (
 from lerobot_omnid.benchmark.methods import (
     ABLATIONS,
     CAMERA_A,
+    CONTROLS,
     METHODS,
     VQBET_CAMERA,
     ablation_flags,
@@ -92,11 +93,25 @@ class BenchmarkProfile:
     small: bool  # CPU-sized models and a short-run optimiser schedule
     fuse_last_step_only: bool = False  # OmniD encodes only the last observation step (cheaper steps)
     task_steps: tuple[tuple[str, int], ...] = ()  # (task, training steps) where not ``steps``: task sizing
+    every_task: bool = False  # ``settings`` and the controls on every task, not on task 0 only
+    controls: tuple[str, ...] = CONTROLS  # the controls planned, of each method's (``method_controls``)
 
     def for_task(self, task: str) -> BenchmarkProfile:
         """This profile with ``task``'s training steps (``task_steps``), which size every method's run on
         it (VQ-BeT's tokeniser phase too)."""
         return dataclasses.replace(self, steps=dict(self.task_steps).get(task, self.steps))
+
+    def task_settings(self, task: str) -> tuple[str, ...]:
+        """The settings ``task`` is evaluated in: ``settings`` on task 0 (on every task with
+        ``every_task``), ID on the others."""
+        return self.settings if task == TASK0 or self.every_task else ("id",)
+
+    def task_controls(self, method: str, task: str) -> tuple[str, ...]:
+        """The controls of ``method``'s model of ``task``: on task 0 (every task with ``every_task``),
+        those of ``method_controls`` that the profile plans."""
+        if task != TASK0 and not self.every_task:
+            return ()
+        return tuple(c for c in method_controls(method) if c in self.controls)
 
 
 # mini uses 64 px images: ResNet-18 forward+backward on a batch's 64 images takes 2.7 s at 96 px on some
@@ -125,6 +140,14 @@ PROFILES = {
         heldout_episodes=0, eval_seeds=(1,), episode_length=200, settings=("id", "ood2", "position_band_2"),
         control_settings=("id",), train_seeds=(TRAIN_SEED,), fewshot=False, ablations=False, device="cuda",
         num_workers=8, small=True, fuse_last_step_only=True,
+    ),
+    # The six-task table on a CPU: mini's data and models (OmniD encoding the last observation step only,
+    # as validated), every method, one unseen table, the controls on every task, two disjoint ranges of
+    # 15 test episodes per cell; trained for each task's sized steps (``--task-steps``).
+    "six-tasks": dataclasses.replace(
+        MINI, name="six-tasks", methods=METHODS, tasks=None, heldout_episodes=0, eval_episodes=15,
+        eval_seeds=(1, 2), settings=("id", "ood2"), every_task=True, controls=("blind", "scrambled"),
+        fuse_last_step_only=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
@@ -209,6 +232,12 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     for train_seed in p.train_seeds:
         runs += plan_models(p, out, tasks, train_seed, fewshot_tasks)
     return plan(runs, out)
+
+
+def train_folder(p: BenchmarkProfile, steps: int) -> str:
+    """Folder of the models trained from scratch: ``train`` at the profile's steps, ``train_steps<n>`` for a
+    task sized to other steps (the task sizing's own folder for that budget, so its run is reused)."""
+    return "train" if steps == p.steps else f"train_steps{steps}"
 
 
 def heldout_settings(p: BenchmarkProfile, tasks: Sequence[str]) -> tuple[str, ...]:
@@ -319,25 +348,30 @@ def plan_models(
 
     for task in tasks:
         sized = p.for_task(task)
+        folder = train_folder(p, sized.steps)
         for method in p.methods:
             flags = [f for f, _ in method_flags(method, sized)]
-            trained = train("train", method, task, f"{task}_bcde", [*common(method), *flags], sized.steps)
+            trained = train(folder, method, task, f"{task}_bcde", [*common(method), *flags], sized.steps)
             cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
-            evaluate(trained, method, task, p.settings if task == TASK0 else ("id",), cameras)
+            settings = p.task_settings(task)
+            evaluate(trained, method, task, settings, cameras)
+            controlled = [s for s in p.control_settings if s in settings]
+            controls(trained, method, task, controlled, cameras, p.task_controls(method, task))
             if task == TASK0:
-                settings = [s for s in p.control_settings if s in p.settings]
-                controls(trained, method, TASK0, settings, cameras, method_controls(method))
                 offline(trained, method, task, heldout_settings(p, tasks))
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
             sized = p.for_task(TASK0)
             flags = [f for f, _ in ablation_flags(name, sized)]
             dataset = f"{TASK0}_a" if name == "omnid_cam_a" else f"{TASK0}_bcde"
-            trained = train("train", name, TASK0, dataset, [*common("omnid"), *flags], sized.steps)
+            trained = train(
+                train_folder(p, sized.steps), name, TASK0, dataset, [*common("omnid"), *flags], sized.steps
+            )
             evaluate(trained, name, TASK0, ("id",), CAMERA_A if name == "omnid_cam_a" else TRAIN_CAMERAS)
+    task0_folder = train_folder(p, p.for_task(TASK0).steps)
     for method in p.methods:
-        start = root / "train" / method / TASK0 / CHECKPOINT_SUBDIR
-        start_run = f"{prefix}train/{method}/{TASK0}"
+        start = root / task0_folder / method / TASK0 / CHECKPOINT_SUBDIR
+        start_run = f"{prefix}{task0_folder}/{method}/{TASK0}"
         if method != "omnid" and fewshot_tasks:  # a copy whose image input is camera A
             src, start = start, root / "finetune" / method / "start_cam_a"
             cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.checkpoint_cameras", "--src", str(src)]

@@ -37,7 +37,7 @@ from gym_omnid import TASKS, TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import method_flags
-from lerobot_omnid.benchmark.plan import PROFILES, TRAIN_SEED
+from lerobot_omnid.benchmark.plan import PROFILES, TRAIN_SEED, train_folder
 from lerobot_omnid.cli import add_protocol_options, report_from_summary
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
@@ -63,9 +63,8 @@ SIZING_FILE = "sizing.json"
 
 
 def train_dir(out: Path, task: str, steps: int) -> Path:
-    """The benchmark's own folder for the first budget, ``train_steps<n>/`` for the others."""
-    folder = "train" if steps == PROFILE.steps else f"train_steps{steps}"
-    return out / folder / METHOD / task
+    """The benchmark's own folder of a model trained for ``steps`` (:func:`plan.train_folder`)."""
+    return out / train_folder(PROFILE, steps) / METHOD / task
 
 
 def validation_dir(out: Path, task: str, steps: int) -> Path:

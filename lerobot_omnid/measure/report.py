@@ -63,7 +63,7 @@ def short_commit(commit: str | None) -> str:
     return sha[:12] + plus + mark
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return [
         "| " + " | ".join(header) + " |",
         "|" + "|".join(" --- " for _ in header) + "|",
@@ -118,7 +118,7 @@ def id_table(
             MISSING if average is None else format_rate(average) + ("*" if len(present) < len(tasks) else "")
         )
     rows = _rows([labels.get(m, m) for m in methods], cells)
-    return _table(
+    return markdown_table(
         ["Method", *(task_title(t) for t in tasks), "Average"],
         [[*r, a] for r, a in zip(rows, averages, strict=True)],
     )
@@ -143,7 +143,7 @@ def generalisation_table(
     cells = [[results.get((m, t, s)) for t, s in keys] for m in methods]
     header = ["Method", "Task 0 ID", "Position OOD", *(f"Background {b}" for b in backgrounds)]
     header += ["Fine-tune Task 0-A", "Fine-tune Task 1-A"]
-    return _table(header, _rows([labels.get(m, m) for m in methods], cells))
+    return markdown_table(header, _rows([labels.get(m, m) for m in methods], cells))
 
 
 ABLATION_ROWS = ("ResNet-18", "ResNet-101", "OFG module", "Multi-view input fusion")
@@ -165,7 +165,7 @@ def ablation_table(results: Mapping[Key, CellResult], task0: str) -> list[str]:
         format_rate(results[key]) if (key := (m, task0, "id")) in results else MISSING
         for _, m, _ in ABLATION_COLUMNS
     ]
-    return _table(
+    return markdown_table(
         ["", *(title for title, _, _ in ABLATION_COLUMNS)], [*rows, ["**Success rate (%)**", *success]]
     )
 
@@ -205,7 +205,7 @@ def comparison_table(
         f"{labels.get(base, base)} - other (pp)",
     ]
     header += ["Fisher p (pooled)"] + (["Fisher p per training seed"] if per_seed else [])
-    return _table(header, rows)
+    return markdown_table(header, rows)
 
 
 def _p(results: Mapping[Key, CellResult], base: str, other: str, task: str, setting: str) -> str:
@@ -244,7 +244,7 @@ def controls_table(
                 row += [format_difference(rate_difference(a.successes, a.episodes, b.successes, b.episodes))]
                 rows.append([*row, format_p(fisher_exact(a.successes, a.episodes, b.successes, b.episodes))])
     header = ["Method", "Control", "Setting", "As trained", "Control", "Margin (pp)", "Fisher p"]
-    return _table(header, rows)
+    return markdown_table(header, rows)
 
 
 def curve_area(
@@ -280,7 +280,7 @@ def curve_table(
         else:
             row.append(format_rate(area[1]) if area[1] is not None else f"{area[0]:.1f}")
     header = ["Method", *(f"{low:g}-{high:g} cm" for low, high in bands.values()), "Area (mean over 0-10 cm)"]
-    return _table(header, rows)
+    return markdown_table(header, rows)
 
 
 def offline_table(
@@ -316,7 +316,7 @@ def offline_table(
             for r in rows:
                 if r[c] != MISSING and float(r[c].split(" / ")[0]) == min(errors):
                     r[c] = f"**{r[c]}**"
-    return _table(["Method", *settings], [*rows, reference])
+    return markdown_table(["Method", *settings], [*rows, reference])
 
 
 def raw_table(
@@ -349,4 +349,4 @@ def raw_table(
         "Commit",
         "Source",
     ]
-    return _table(header, rows)
+    return markdown_table(header, rows)

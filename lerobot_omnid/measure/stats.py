@@ -3,7 +3,11 @@
 - :func:`wilson_interval`: the Wilson score interval of a success rate (k successes in n episodes);
 - :func:`fisher_exact`: the two-sided p-value of Fisher's exact test of a 2x2 table (two success rates);
 - :func:`rate_difference`: the difference of two success rates with Newcombe's hybrid score interval
-  (method 10 of Newcombe 1998, built from the two Wilson intervals).
+  (method 10 of Newcombe 1998, built from the two Wilson intervals);
+- :func:`mantel_haenszel`: the p-value of two methods compared over several tasks at once (the
+  Cochran-Mantel-Haenszel test, stratified by task);
+- :func:`heterogeneity`: how much the difference between two methods varies from task to task (Cochran's
+  Q on the per-task rate differences, and I^2).
 
 Rates are fractions in [0, 1]; the report prints them as percentages.
 """
@@ -85,3 +89,75 @@ def rate_difference(successes_1: int, n_1: int, successes_2: int, n_2: int, z: f
     low = difference - math.hypot(first.value - first.low, second.high - second.value)
     high = difference + math.hypot(first.high - first.value, second.value - second.low)
     return Estimate(difference, low, high)
+
+
+Counts = tuple[int, int, int, int]
+"""One stratum (a task) of a comparison: (successes_1, n_1, successes_2, n_2)."""
+
+
+def chi2_sf(x: float, df: int) -> float:
+    """P(X >= x) for X chi-squared with ``df`` (a positive int) degrees of freedom: the closed forms for
+    integer degrees of freedom (Abramowitz and Stegun 26.4.4 and 26.4.5)."""
+    if isinstance(df, bool) or not isinstance(df, int) or df < 1:
+        raise ValueError(f"df: expected a positive int, got {df!r}")
+    if x <= 0:
+        return 1.0
+    half = x / 2
+    if df % 2 == 0:
+        term, total = 1.0, 1.0
+        for j in range(1, df // 2):
+            term *= half / j
+            total += term
+        return min(1.0, math.exp(-half) * total)
+    term, total = 1.0, 0.0
+    for j in range(1, (df - 1) // 2 + 1):
+        total += term
+        term *= x / (2 * j + 1)
+    return min(1.0, math.erfc(math.sqrt(half)) + math.sqrt(2 * x / math.pi) * math.exp(-half) * total)
+
+
+def mantel_haenszel(strata: list[Counts]) -> float:
+    """Two-sided p-value of the Cochran-Mantel-Haenszel test that two methods succeed equally often, with
+    the tasks as strata (each task's 2x2 table kept apart, so a task where both do well cannot stand in for
+    one where neither does); with the continuity correction, as R's ``mantelhaen.test``. Strata where
+    every episode or none succeeded carry no information and count for nothing."""
+    deviation = variance = 0.0
+    for i, (s1, n1, s2, n2) in enumerate(strata):
+        _check_counts(s1, n1, f"_1 of stratum {i}")
+        _check_counts(s2, n2, f"_2 of stratum {i}")
+        total, successes = n1 + n2, s1 + s2
+        deviation += s1 - n1 * successes / total
+        variance += n1 * n2 * successes * (total - successes) / (total * total * (total - 1))
+    if variance == 0:
+        return 1.0
+    return chi2_sf(max(0.0, abs(deviation) - 0.5) ** 2 / variance, 1)
+
+
+@dataclass(frozen=True)
+class Heterogeneity:
+    """Cochran's Q of per-stratum rate differences, its degrees of freedom and p-value, and I^2 (the share
+    of the variation between strata beyond chance, 0..1)."""
+
+    q: float
+    df: int
+    p: float
+    i2: float
+
+
+def heterogeneity(strata: list[Counts]) -> Heterogeneity:
+    """Whether the difference ``rate_1 - rate_2`` is the same in every stratum: Cochran's Q with
+    inverse-variance weights; each rate's variance uses (successes + 0.5) / (n + 1), so a stratum at 0 or
+    n successes keeps a finite weight."""
+    if len(strata) < 2:
+        raise ValueError(f"strata: expected at least 2 to compare, got {len(strata)}")
+    differences, weights = [], []
+    for i, (s1, n1, s2, n2) in enumerate(strata):
+        _check_counts(s1, n1, f"_1 of stratum {i}")
+        _check_counts(s2, n2, f"_2 of stratum {i}")
+        p1, p2 = (s1 + 0.5) / (n1 + 1), (s2 + 0.5) / (n2 + 1)
+        differences.append(s1 / n1 - s2 / n2)
+        weights.append(1 / (p1 * (1 - p1) / n1 + p2 * (1 - p2) / n2))
+    mean = sum(w * d for w, d in zip(weights, differences, strict=True)) / sum(weights)
+    q = sum(w * (d - mean) ** 2 for w, d in zip(weights, differences, strict=True))
+    df = len(strata) - 1
+    return Heterogeneity(q, df, chi2_sf(q, df), max(0.0, (q - df) / q) if q > 0 else 0.0)

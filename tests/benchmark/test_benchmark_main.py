@@ -349,6 +349,30 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
     assert "position_band_2" in (tmp_path / "b" / "report.md").read_text()
 
 
+def test_six_tasks_profile_reports_every_task_with_controls_and_ranges(monkeypatch, tmp_path):
+    """The six-task profile on two tasks with the tools stood in: every method trained and evaluated on
+    both, the report's every-task table with its ranges and controls (a method no better than its blind
+    control marked) and OmniD against each method pooled over the tasks."""
+    calls: list[str] = []
+    rates = {"omnid": 60.0, "omnid/blind": 0.0, "diffusion": 20.0, "diffusion/blind": 20.0}
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates))
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    argv = ["--profile", "six-tasks", "--tasks", "add_condiment,get_coffee", "--out", str(tmp_path)]
+    assert bench.main([*argv, "--methods", "omnid,diffusion"]) == 0
+    assert calls.count("lerobot-train") == 4
+    report = (tmp_path / "report.md").read_text()
+    table = report.split("## Every task: each method beside its controls")[1].split("\n## ")[0]
+    assert "| range 1 | range 2 | blind | scrambled | ood2 |" in table
+    rows = {
+        tuple(c.strip() for c in line.split("|")[1:3]): line for line in table.splitlines() if "|" in line
+    }
+    assert "60.0 (" in rows[("add_condiment", "OmniD")] and "†" not in rows[("add_condiment", "OmniD")]
+    assert "20.0 (" in rows[("get_coffee", "DP")] and "†" in rows[("get_coffee", "DP")]
+    assert "| 18/30 (42.3-75.4 %) | 18/30 (42.3-75.4 %) |" in rows[("**pooled, 2 tasks**", "OmniD")]
+    pooled = report.split("## OmniD against each method over the tasks")[1]
+    assert "| DP | +40.0" in pooled and "| yes |" in pooled
+
+
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
@@ -386,3 +410,8 @@ def test_task_steps_come_from_a_sizing_file(monkeypatch, tmp_path, capsys):
     sizing.write_text(json.dumps({"select_apple": 3000}))
     assert bench.main(["--task-steps", str(sizing), "--out", str(tmp_path / "b"), "--dry-run"]) == 0
     assert capsys.readouterr().out.count("--steps=3000 ") == 2  # OmniD and DP on select_apple
+    # A task the file does not name (still being sized) is not trained for the profile's steps instead.
+    argv = ["--task-steps", str(sizing), "--tasks", "select_apple,get_coffee", "--dry-run"]
+    with pytest.raises(SystemExit):
+        bench.main([*argv, "--out", str(tmp_path / "c")])
+    assert "got none for ['get_coffee']" in capsys.readouterr().err

@@ -13,6 +13,7 @@ import gym_omnid.constants
 import pytest
 from omnid_testing import by_name, flag
 
+from lerobot_omnid.benchmark import task_sizing
 from lerobot_omnid.benchmark.methods import METHODS
 from lerobot_omnid.benchmark.plan import (
     BANDS,
@@ -26,7 +27,7 @@ from lerobot_omnid.benchmark.plan import (
     available_tasks,
     build_plan,
 )
-from lerobot_omnid.measure.engine import CHECKPOINT
+from lerobot_omnid.measure.engine import CHECKPOINT, plan
 
 
 def test_mini_plan_same_data_steps_and_seeds_for_omnid_and_dp(tmp_path):
@@ -286,12 +287,46 @@ def test_mini_fewshot_profile_fine_tunes_minis_own_task0_models(tmp_path):
 
 
 def test_task_steps_size_every_method_on_that_task_only(tmp_path):
-    """A sized task trains every method for its steps (VQ-BeT's tokeniser phase with them); the others keep
-    the profile's, so their runs are the unsized plan's."""
+    """A sized task trains every method for its steps (VQ-BeT's tokeniser phase with them), in the folder
+    that names them; the others keep the profile's, so their runs are the unsized plan's."""
     p = dataclasses.replace(PROFILES["mini"], methods=METHODS, task_steps=(("get_coffee", 3000),))
     runs = by_name(build_plan(p, tmp_path, (TASK0, "get_coffee")))
     unsized = by_name(build_plan(dataclasses.replace(p, task_steps=()), tmp_path, (TASK0, "get_coffee")))
     for method in METHODS:
-        assert flag(runs[f"train/{method}/get_coffee"].cmd, "steps") == "3000"
+        sized = runs[f"train_steps3000/{method}/get_coffee"]
+        assert flag(sized.cmd, "steps") == "3000"
+        assert flag(sized.cmd, "output_dir") == str(tmp_path / "train_steps3000" / method / "get_coffee")
+        assert runs[f"eval/{method}/get_coffee/id/seed1"].needs == (sized.name,)
         assert runs[f"train/{method}/{TASK0}"].cmd == unsized[f"train/{method}/{TASK0}"].cmd
-    assert flag(runs["train/vqbet/get_coffee"].cmd, "policy.n_vqvae_training_steps") == "600"
+    assert flag(runs["train_steps3000/vqbet/get_coffee"].cmd, "policy.n_vqvae_training_steps") == "600"
+
+
+def test_six_tasks_profile_reuses_the_sizing_runs_and_controls_every_task(tmp_path):
+    """The six-task profile trains DP with the task sizing's very commands (its runs are reused, at either
+    budget) and evaluates every method on every task in ID and one unseen table on two ranges of env seeds,
+    with each method's blind control and OmniD's scrambled one in ID; no perturbed control, no open-loop
+    runs."""
+    p = dataclasses.replace(PROFILES["six-tasks"], task_steps=(("get_coffee", 3000),))
+    tasks = ("add_condiment", "get_coffee")
+    runs = by_name(build_plan(p, tmp_path, tasks))
+    sizing_runs = task_sizing.task_runs(tmp_path, "add_condiment", [1000])
+    sizing_runs += task_sizing.task_runs(tmp_path, "get_coffee", [1000, 3000])
+    sizing = by_name(plan(sizing_runs, tmp_path))
+    for name in (
+        "record/get_coffee_bcde",
+        "train/diffusion/add_condiment",
+        "train_steps3000/diffusion/get_coffee",
+    ):
+        assert runs[name].fingerprint == sizing[name].fingerprint, name
+    for task in tasks:
+        for method in METHODS:
+            for k in (1, 2):
+                for setting in ("id", "ood2"):
+                    assert runs[f"eval/{method}/{task}/{setting}/seed{k}"].result == (method, task, setting)
+                blind = runs[f"eval_blind/{method}/{task}/id/seed{k}"]
+                assert blind.control == "blind" and flag(blind.cmd, "eval.n_episodes") == "15"
+                assert f"eval_blind/{method}/{task}/ood2/seed{k}" not in runs  # the ID one's serves
+        assert f"eval_scrambled/omnid/{task}/id/seed1" in runs
+        assert f"eval_scrambled/diffusion/{task}/id/seed1" not in runs
+    assert not any(n.startswith(("eval_perturbed/", "offline/")) for n in runs)
+    assert "--policy.fuse_last_step_only=true" in runs["train/omnid/add_condiment"].cmd

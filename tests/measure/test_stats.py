@@ -7,7 +7,15 @@ import math
 
 import pytest
 
-from lerobot_omnid.measure.stats import Z_95, fisher_exact, rate_difference, wilson_interval
+from lerobot_omnid.measure.stats import (
+    Z_95,
+    chi2_sf,
+    fisher_exact,
+    heterogeneity,
+    mantel_haenszel,
+    rate_difference,
+    wilson_interval,
+)
 
 
 @pytest.mark.parametrize(
@@ -93,3 +101,30 @@ def test_rate_difference_newcombe_examples():
 def test_bad_counts_are_named(call, message):
     with pytest.raises((ValueError, TypeError), match=message):
         call()
+
+
+def test_chi2_sf_closed_forms():
+    """Tabulated quantiles (upper tail 0.05 and 0.01) and the tail at 0."""
+    for x, df, tail in ((3.841459, 1, 0.05), (5.991465, 2, 0.05), (11.070498, 5, 0.05), (16.811894, 6, 0.01)):
+        assert chi2_sf(x, df) == pytest.approx(tail, rel=1e-5)
+    assert chi2_sf(0.0, 3) == 1.0
+    with pytest.raises(ValueError, match="df: expected a positive int, got 0"):
+        chi2_sf(1.0, 0)
+
+
+def test_mantel_haenszel_matches_statsmodels():
+    """p-values of statsmodels' ``StratifiedTable.test_null_odds(correction=True)`` on the same tables; a
+    stratum where nobody succeeds adds nothing; no informative stratum gives p = 1."""
+    assert mantel_haenszel([(10, 15, 5, 15), (12, 15, 6, 15)]) == pytest.approx(0.0103365021, rel=1e-8)
+    with_empty = [(3, 15, 1, 15), (0, 15, 0, 15), (9, 15, 2, 15)]
+    assert mantel_haenszel(with_empty) == pytest.approx(0.0148876709, rel=1e-8)
+    assert mantel_haenszel([(0, 15, 0, 15), (15, 15, 15, 15)]) == 1.0
+
+
+def test_heterogeneity_separates_a_steady_difference_from_a_reversed_one():
+    steady = heterogeneity([(10, 15, 5, 15), (10, 15, 5, 15), (11, 15, 6, 15)])
+    assert steady.df == 2 and steady.q < 0.1 and steady.p > 0.9 and steady.i2 == 0.0
+    reversed_ = heterogeneity([(10, 15, 5, 15), (12, 15, 6, 15), (0, 15, 14, 15)])
+    assert reversed_.p < 1e-6 and reversed_.i2 > 0.9
+    with pytest.raises(ValueError, match="strata: expected at least 2 to compare, got 1"):
+        heterogeneity([(1, 2, 1, 2)])
