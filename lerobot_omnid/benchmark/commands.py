@@ -68,6 +68,19 @@ def record_command(
     ]
 
 
+def merge_command(parts: Sequence[Path], root: Path) -> list[str]:
+    """`lerobot-edit-dataset` merging the local datasets ``parts`` (same features) into ``root`` (repo id
+    ``local/<root name>``)."""
+    return [
+        str(BIN / "lerobot-edit-dataset"),
+        f"--new_repo_id=local/{root.name}",
+        f"--new_root={root}",
+        "--operation.type=merge",
+        f"--operation.repo_ids={json.dumps([f'local/{part.name}' for part in parts])}",
+        f"--operation.roots={json.dumps([str(part) for part in parts])}",
+    ]
+
+
 def train_command(
     dataset_root: Path,
     output_dir: Path,

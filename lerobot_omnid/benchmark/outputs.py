@@ -34,6 +34,8 @@ from lerobot_omnid.benchmark.plan import (
     FEWSHOT_SEED,
     HELDOUT_SEED,
     LABELS,
+    MULTITASK,
+    MULTITASK_METHODS,
     OFFLINE_OUTPUT,
     SETTINGS,
     TASK0,
@@ -41,6 +43,8 @@ from lerobot_omnid.benchmark.plan import (
     BenchmarkProfile,
     control_setting,
     heldout_settings,
+    multitask,
+    multitask_steps,
     seed_folder,
 )
 from lerobot_omnid.measure import across_tasks, charts, report, results
@@ -93,6 +97,13 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         "calibration for OmniD, black for the others)."
         if p.fewshot
         else "- Few-shot fine-tuning: not in this profile.",
+        f"- One model for every task: OmniD and DP trained on the {len(tasks)} tasks' training sets together "
+        "(the same episodes, recorded with the task as a one-hot in `observation.environment_state`, merged "
+        f"with `lerobot-edit-dataset`) for {multitask_steps(p, tasks)} steps, the single-task models' "
+        "together; evaluated on every task in ID with the one-hot (`--env.task_onehot=true`) beside its "
+        "blind control."
+        if multitask(p, tasks)
+        else "- One model for every task: not in this profile.",
         "- Cells pool the episodes of all eval and training seeds: success rate (%) with its Wilson 95 % "
         "interval; differences in percentage points with Newcombe's hybrid score interval; p: two-sided "
         "Fisher exact test. `—`: not run (yet).",
@@ -199,6 +210,21 @@ def every_task_lines(
     if "omnid" in methods and len(methods) > 1 and len(tasks) > 1:
         lines += ["", "## OmniD against each method over the tasks", ""]
         lines += across_tasks.pooled_comparison(records, methods, tasks, LABELS)
+    together = [m for m in MULTITASK_METHODS if any(r.key[0] == m + MULTITASK for r in records)]
+    if together:
+        models = [model for m in together for model in (m + MULTITASK, m)]
+        lines += [
+            "",
+            "## One model for every task against one model per task",
+            "",
+            f"Each method trained on every task together ({multitask_steps(p, tasks)} steps, the single-task "
+            "models' together), told the task by a one-hot in `observation.environment_state`; ID per task "
+            "beside its blind control, then against the single-task models over the tasks.",
+            "",
+            *across_tasks.task_table(records, models, tasks, LABELS, controls=("blind",)),
+        ]
+        for m in together:
+            lines += ["", *across_tasks.pooled_comparison(records, (m,), tasks, LABELS, base=m + MULTITASK)]
     return lines
 
 

@@ -25,6 +25,7 @@ from lerobot_omnid.benchmark.commands import (
     BIN,
     control_calibration_command,
     eval_command,
+    merge_command,
     record_command,
     train_command,
 )
@@ -43,11 +44,17 @@ from lerobot_omnid.benchmark.methods import (
 from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.measure.engine import Run, plan
 
+MULTITASK_METHODS = ("omnid", "diffusion")
+MULTITASK = "_multitask"
+"""Suffix of a method's model trained on every task together, told the task by a one-hot in
+``observation.environment_state`` (``omnid-record --task-onehot``, ``--env.task_onehot=true``)."""
 LABELS = {
     "omnid": "OmniD",
     "diffusion": "DP",
     "act": "ACT",
     "vqbet": "VQ-BeT",
+    "omnid_multitask": "OmniD multi-task",
+    "diffusion_multitask": "DP multi-task",
     "omnid_resnet101": "OmniD ResNet-101",
     "omnid_no_ofg": "OmniD w/o OFG",
     "omnid_cam_a": "OmniD camera A",
@@ -94,6 +101,7 @@ class BenchmarkProfile:
     fuse_last_step_only: bool = False  # OmniD encodes only the last observation step (cheaper steps)
     task_steps: tuple[tuple[str, int], ...] = ()  # (task, training steps) where not ``steps``: task sizing
     every_task: bool = False  # ``settings`` and the controls on every task, not on task 0 only
+    multitask: bool = False  # also one OmniD and one DP trained on every task together (MULTITASK_METHODS)
     controls: tuple[str, ...] = CONTROLS  # the controls planned, of each method's (``method_controls``)
 
     def for_task(self, task: str) -> BenchmarkProfile:
@@ -143,11 +151,12 @@ PROFILES = {
     ),
     # The six-task table on a CPU: mini's data and models (OmniD encoding the last observation step only,
     # as validated), every method, one unseen table, the controls on every task, two disjoint ranges of
-    # 15 test episodes per cell; trained for each task's sized steps (``--task-steps``).
+    # 15 test episodes per cell; trained for each task's sized steps (``--task-steps``); then OmniD and DP
+    # trained on every task together for the steps of the six single-task models together.
     "six-tasks": dataclasses.replace(
         MINI, name="six-tasks", methods=METHODS, tasks=None, heldout_episodes=0, eval_episodes=15,
         eval_seeds=(1, 2), settings=("id", "ood2"), every_task=True, controls=("blind", "scrambled"),
-        fuse_last_step_only=True,
+        fuse_last_step_only=True, multitask=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
@@ -211,15 +220,31 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     runs: list[Run] = []
 
     def record(
-        name: str, task: str, cameras: Sequence[str], episodes: int, seed: int, setting: str = "id"
+        name: str,
+        task: str,
+        cameras: Sequence[str],
+        episodes: int,
+        seed: int,
+        setting: str = "id",
+        onehot: bool = False,
     ) -> None:
         root = out / "data" / name
         layout, background = setting_env(setting)
         cmd = record_command(task, episodes, cameras, p.image_size, root, seed, layout, background)
+        cmd += ["--task-onehot"] if onehot else []
         runs.append(Run(f"record/{name}", "record", tuple(cmd), root, episodes=episodes))
 
     for task in tasks:
         record(f"{task}_bcde", task, TRAIN_CAMERAS, p.episodes, seed=0)
+    if multitask(p, tasks):  # the same episodes, with the task one-hot, merged into one dataset
+        for task in tasks:
+            record(f"{task}_bcde_onehot", task, TRAIN_CAMERAS, p.episodes, seed=0, onehot=True)
+        parts = [f"{task}_bcde_onehot" for task in tasks]
+        root = out / "data" / MULTITASK_DATASET
+        cmd = merge_command([out / "data" / part for part in parts], root)
+        runs.append(
+            Run(f"merge/{MULTITASK_DATASET}", "merge", tuple(cmd), root, tuple(f"record/{x}" for x in parts))
+        )
     if p.ablations and TASK0 in tasks:
         record(f"{TASK0}_a", TASK0, CAMERA_A, p.episodes, seed=0)  # the B-E set's episodes, seen by A
     fewshot_tasks = (TASK0, TASK1) if p.fewshot and TASK0 in tasks else ()
@@ -232,6 +257,19 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     for train_seed in p.train_seeds:
         runs += plan_models(p, out, tasks, train_seed, fewshot_tasks)
     return plan(runs, out)
+
+
+MULTITASK_DATASET = "all_tasks_bcde_onehot"
+
+
+def multitask(p: BenchmarkProfile, tasks: Sequence[str]) -> bool:
+    """Whether the plan has the multi-task models: asked for, and more than one task."""
+    return p.multitask and len(tasks) > 1
+
+
+def multitask_steps(p: BenchmarkProfile, tasks: Sequence[str]) -> int:
+    """Training steps of a multi-task model: those of the single-task models of ``tasks`` together."""
+    return sum(p.for_task(task).steps for task in tasks)
 
 
 def train_folder(p: BenchmarkProfile, steps: int) -> str:
@@ -258,11 +296,13 @@ def plan_models(
     def train(
         folder: str, model: str, task: str, dataset: str, flags: list[str], steps: int, needs=()
     ) -> Run:
+        """Train ``model`` on ``dataset`` (made by its "record" run, or the multi-task "merge")."""
         output = root / folder / model / task
         data = out / "data" / dataset
         cmd = train_command(data, output, flags, steps, p.batch_size, p.num_workers, seed=train_seed)
         name = f"{prefix}{folder}/{model}/{task}"
-        run = Run(name, "train", tuple(cmd), output, (f"record/{dataset}", *needs), train_seed=train_seed)
+        made_by = f"merge/{dataset}" if dataset == MULTITASK_DATASET else f"record/{dataset}"
+        run = Run(name, "train", tuple(cmd), output, (made_by, *needs), train_seed=train_seed)
         runs.append(run)
         return run
 
@@ -308,25 +348,29 @@ def plan_models(
         cameras: Sequence[str],
         kinds: Sequence[str],
         model: str = "",
+        key: str = "",
+        options: Sequence[str] = (),
     ) -> None:
         """The ``kinds`` of controls of ``trained`` (a ``method`` checkpoint) on ``task`` in ``settings``;
-        ``model`` ("" for the checkpoint trained from scratch, else e.g. ``FEWSHOT``) names its files."""
+        ``model`` ("" for the checkpoint trained from scratch, else e.g. ``FEWSHOT``) names its files;
+        ``key`` is the model of its table cells (default ``method``), ``options`` go to every evaluation."""
+        key = key or method
         for control in kinds if settings else ():
             needs: tuple[str, ...] = ()
             where = f"{model}/{control}" if model else control
-            calibration_file = root / "controls" / method / task / f"{where}.json"
+            calibration_file = root / "controls" / key / task / f"{where}.json"
             if method == "omnid":
                 cmd = control_calibration_command(
                     trained.output / CHECKPOINT_SUBDIR, control, calibration_file
                 )
-                name = f"{prefix}calibration/{method}/{task}/{where}"
+                name = f"{prefix}calibration/{key}/{task}/{where}"
                 run = Run(
                     name, "calibration", tuple(cmd), calibration_file, (trained.name,), train_seed=train_seed
                 )
                 runs.append(run)
                 needs = (run.name,)
-            options = [f for f, _ in control_flags(method, control, cameras, calibration_file)]
-            evaluate(trained, method, task, settings, cameras, control, options, needs)
+            flags = [f for f, _ in control_flags(method, control, cameras, calibration_file)]
+            evaluate(trained, key, task, settings, cameras, control, [*flags, *options], needs)
 
     def offline(trained: Run, model: str, task: str, settings: Sequence[str]) -> None:
         """Open-loop action error of ``trained`` on the held-out expert episodes of each setting."""
@@ -359,6 +403,18 @@ def plan_models(
             controls(trained, method, task, controlled, cameras, p.task_controls(method, task))
             if task == TASK0:
                 offline(trained, method, task, heldout_settings(p, tasks))
+    if multitask(p, tasks):
+        steps = multitask_steps(p, tasks)
+        sized = dataclasses.replace(p, steps=steps)
+        onehot = ("--env.task_onehot=true",)
+        for method in MULTITASK_METHODS:
+            flags = [*common(method), *(f for f, _ in method_flags(method, sized))]
+            trained = train("train_multitask", method, "all_tasks", MULTITASK_DATASET, flags, steps)
+            key = method + MULTITASK
+            for task in tasks:
+                evaluate(trained, key, task, ("id",), TRAIN_CAMERAS, control_options=onehot)
+                kinds = tuple(c for c in p.task_controls(method, task) if c == "blind")
+                controls(trained, method, task, ("id",), TRAIN_CAMERAS, kinds, key=key, options=onehot)
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
             sized = p.for_task(TASK0)

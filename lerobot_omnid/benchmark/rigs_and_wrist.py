@@ -84,15 +84,8 @@ def record(out: Path, name: str) -> list[str]:
 
 
 def merge(out: Path) -> list[str]:
-    parts = ["default_bcde_half", "closer_bcde_half"]
-    return [
-        str(commands.BIN / "lerobot-edit-dataset"),
-        "--new_repo_id=local/two_rigs",
-        f"--new_root={out / 'data' / 'two_rigs'}",
-        "--operation.type=merge",
-        f"--operation.repo_ids={json.dumps([f'local/{p}' for p in parts])}",
-        f"--operation.roots={json.dumps([str(out / 'data' / p) for p in parts])}",
-    ]
+    parts = [out / "data" / "default_bcde_half", out / "data" / "closer_bcde_half"]
+    return commands.merge_command(parts, out / "data" / "two_rigs")
 
 
 def train(out: Path, model: str) -> list[str]:

@@ -39,6 +39,10 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
             (root / "meta" / "info.json").write_text(
                 json.dumps({"total_episodes": int(cmd[cmd.index("--episodes") + 1])})
             )
+        elif tool == "lerobot-edit-dataset":
+            root = Path(flag(cmd, "new_root"))
+            (root / "meta").mkdir(parents=True)
+            (root / "meta" / "info.json").write_text("{}")
         elif tool == "omnid-offline-eval":
             out = Path(cmd[cmd.index("--out") + 1])  # .../offline/<model>/<task>/<setting>/offline_eval.json
             out.parent.mkdir(parents=True, exist_ok=True)
@@ -358,8 +362,9 @@ def test_six_tasks_profile_reports_every_task_with_controls_and_ranges(monkeypat
     monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates))
     monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
     argv = ["--profile", "six-tasks", "--tasks", "add_condiment,get_coffee", "--out", str(tmp_path)]
+    rates |= {"omnid_multitask": 40.0, "diffusion_multitask": 20.0}
     assert bench.main([*argv, "--methods", "omnid,diffusion"]) == 0
-    assert calls.count("lerobot-train") == 4
+    assert calls.count("lerobot-train") == 6 and calls.count("lerobot-edit-dataset") == 1
     report = (tmp_path / "report.md").read_text()
     table = report.split("## Every task: each method beside its controls")[1].split("\n## ")[0]
     assert "| range 1 | range 2 | blind | scrambled | ood2 |" in table
@@ -369,8 +374,11 @@ def test_six_tasks_profile_reports_every_task_with_controls_and_ranges(monkeypat
     assert "60.0 (" in rows[("add_condiment", "OmniD")] and "†" not in rows[("add_condiment", "OmniD")]
     assert "20.0 (" in rows[("get_coffee", "DP")] and "†" in rows[("get_coffee", "DP")]
     assert "| 18/30 (42.3-75.4 %) | 18/30 (42.3-75.4 %) |" in rows[("**pooled, 2 tasks**", "OmniD")]
-    pooled = report.split("## OmniD against each method over the tasks")[1]
+    pooled = report.split("## OmniD against each method over the tasks")[1].split("\n## ")[0]
     assert "| DP | +40.0" in pooled and "| yes |" in pooled
+    together = report.split("## One model for every task against one model per task")[1]
+    assert "| **pooled, 2 tasks** | OmniD multi-task | 40.0 (" in together
+    assert "| OmniD | -20.0" in together and "| DP | +0.0" in together
 
 
 @pytest.mark.parametrize(

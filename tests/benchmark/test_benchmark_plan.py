@@ -330,3 +330,36 @@ def test_six_tasks_profile_reuses_the_sizing_runs_and_controls_every_task(tmp_pa
         assert f"eval_scrambled/diffusion/{task}/id/seed1" not in runs
     assert not any(n.startswith(("eval_perturbed/", "offline/")) for n in runs)
     assert "--policy.fuse_last_step_only=true" in runs["train/omnid/add_condiment"].cmd
+
+
+def test_six_tasks_profile_trains_one_model_for_every_task(tmp_path):
+    """OmniD and DP also trained on the tasks' episodes recorded again with the task one-hot and merged,
+    for the single-task models' steps together, evaluated on every task with the one-hot beside their blind
+    controls; the single-task runs are those of the plan without them."""
+    p = dataclasses.replace(PROFILES["six-tasks"], task_steps=(("get_coffee", 3000),))
+    tasks = ("add_condiment", "get_coffee")
+    runs = by_name(build_plan(p, tmp_path, tasks))
+    alone = by_name(build_plan(dataclasses.replace(p, multitask=False), tmp_path, tasks))
+    assert {n: r.fingerprint for n, r in alone.items()} == {n: runs[n].fingerprint for n in alone}
+    for task in tasks:
+        record = runs[f"record/{task}_bcde_onehot"].cmd
+        same = tuple(arg.replace("_bcde_onehot", "_bcde") for arg in record[:-1])
+        assert record[-1] == "--task-onehot" and same == runs[f"record/{task}_bcde"].cmd
+    merge = runs["merge/all_tasks_bcde_onehot"]
+    assert merge.needs == ("record/add_condiment_bcde_onehot", "record/get_coffee_bcde_onehot")
+    assert json.loads(flag(merge.cmd, "operation.roots")) == [
+        str(tmp_path / "data" / f"{task}_bcde_onehot") for task in tasks
+    ]
+    for method in ("omnid", "diffusion"):
+        trained = runs[f"train_multitask/{method}/all_tasks"]
+        assert trained.needs == ("merge/all_tasks_bcde_onehot",) and flag(trained.cmd, "steps") == "4000"
+        assert flag(trained.cmd, "dataset.root") == str(merge.output)
+        for task in tasks:
+            for k in (1, 2):
+                for folder in ("eval", "eval_blind"):
+                    run = runs[f"{folder}/{method}_multitask/{task}/id/seed{k}"]
+                    assert run.result == (f"{method}_multitask", task, "id")
+                    assert "--env.task_onehot=true" in run.cmd and run.needs[0] == trained.name
+    assert not any(n.startswith("train_multitask/act") for n in runs)
+    solo = build_plan(dataclasses.replace(p, multitask=True), tmp_path, ("add_condiment",))
+    assert not any("multitask" in r.name for r in solo)  # one task: nothing to train together
