@@ -63,7 +63,7 @@ STEPS = 2000
 EPISODE_LENGTH = 300  # env steps at 80 Hz: 1.5x the slowest expert episode (disassemble, 206 steps)
 TEST_SEEDS = (1000, 2000)  # two disjoint ranges of env seeds, reported apart and pooled
 TEST_EPISODES = 15  # per range: 30 per cell
-VOLUME_BOUNDS = "[[-0.4,0.4],[0.35,0.95],[-0.05,0.35]]"  # MetaWorld's frame: x right, y forward, z up (m)
+VOLUME_BOUNDS = "[[-0.35,0.45],[0.35,0.95],[-0.05,0.35]]"  # MetaWorld's frame: x right, y forward, z up (m)
 VOLUME_SHAPE = "[16,12,8]"  # 5 cm cells
 MODELS = {  # name: (LeRobot policy type, cameras)
     "omnid": ("omnid", DEFAULT_CAMERAS),

@@ -3,6 +3,7 @@ format, seeded layouts, cheap rendering and MetaWorld's scripted experts through
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 
 import gymnasium as gym
@@ -14,11 +15,13 @@ pytest.importorskip("metaworld")
 
 import gym_omnid.metaworld_suite as suite
 from gym_omnid.calibration import EXTRINSICS_OBS_PREFIX, INTRINSICS_OBS_PREFIX, invert_rigid
-from gym_omnid.metaworld_suite.env import MOCAP_WELD_DATA, MetaWorldEnv
+from gym_omnid.metaworld_suite.env import MOCAP_WELD_DATA, MetaWorldEnv, make_metaworld_env
 from gym_omnid.metaworld_suite.experts import make_expert, run_expert_episode
 from gymnasium.utils.env_checker import check_env
 from metaworld.env_dict import ALL_V3_ENVIRONMENTS
 from metaworld.policies import ENV_POLICY_MAP
+
+from lerobot_omnid.benchmark import metaworld_comparison
 
 SIZE = 32  # px: small images keep these tests fast
 EXPERT_TASKS = ("push-v3", "assembly-v3")
@@ -187,3 +190,24 @@ def test_bad_kwargs_are_named(kwargs: dict, expected: str) -> None:
     with pytest.raises(ValueError) as err:
         MetaWorldEnv(**{"task": "push-v3", **kwargs})
     assert expected in str(err.value)
+
+
+def test_the_comparisons_volume_holds_every_hand_object_and_goal_of_the_experts_episodes() -> None:
+    """OmniD's volume in the MetaWorld comparison is this suite's workspace: the hand, both objects and the
+    goal stay inside it through the scripted experts' episodes of the compared tasks (MetaWorld's flat
+    observation, layouts of env seeds 0-4)."""
+    low, high = np.array(json.loads(metaworld_comparison.VOLUME_BOUNDS)).T
+    for task in metaworld_comparison.PUBLISHED:
+        env, expert = make_metaworld_env(task), ENV_POLICY_MAP[task]()
+        for seed in range(5):
+            env.seed(seed)
+            obs, _ = env.reset()
+            for _ in range(metaworld_comparison.EPISODE_LENGTH):
+                # hand, first object, second object (zero where the task has none), goal
+                for point in (obs[0:3], obs[4:7], obs[11:14], obs[-3:]):
+                    if point.any():
+                        assert np.all((low <= point) & (point <= high)), (task, seed, point.round(3))
+                obs, _, _, _, info = env.step(expert.get_action(obs))
+                if info["success"]:
+                    break
+        env.close()
