@@ -4,10 +4,12 @@ LeRobot builds ``gym.make(f"gym_omnid/{task}", **gym_kwargs)`` from this config 
 observation ``pixels[<cam>]`` to ``observation.images.<cam>`` and ``agent_pos`` to ``observation.state``;
 with ``per_frame_calibration`` (the default) also ``extrinsics.<cam>`` / ``intrinsics.<cam>`` to the
 dataset columns ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>``
-(:mod:`lerobot_omnid.calibration.frame_columns`) that ``omnid-record`` writes by default. A policy reads
-only the keys it was made with, so the columns are harmless to one that does not use them (an OmniD
-checkpoint with its calibration in ``config.json``, LeRobot's stock policies): LeRobot's normaliser and the
-policies' observation queues skip keys outside their features.
+(:mod:`lerobot_omnid.calibration.frame_columns`) that ``omnid-record`` writes by default; with
+``task_onehot`` also ``environment_state`` (the task as a one-hot) to ``observation.environment_state``, the
+column of ``omnid-record --task-onehot``. A policy reads only the keys it was made with, so the columns are
+harmless to one that does not use them (an OmniD checkpoint with its calibration in ``config.json``,
+LeRobot's stock policies): LeRobot's normaliser and the policies' observation queues skip keys outside
+their features.
 
 Example::
 
@@ -32,18 +34,20 @@ from gym_omnid.constants import (
     BACKGROUNDS,
     CONTROL_FPS,
     DEFAULT_RIG,
+    ENV_STATE_OBS_KEY,
     LAYOUTS,
     MAX_EPISODE_STEPS,
     MAX_IMAGE_SIDE,
     RIGS,
     STATE_DIM,
+    TASK_ONEHOT_NAMES,
     TASKS,
     TRAIN_CAMERAS,
     WRIST_CAMERA,
 )
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
 from lerobot_omnid.calibration.frame_columns import (
     EXTRINSICS_NAMES,
@@ -101,10 +105,17 @@ def validate_image_size(field_name: str, image_size: Any) -> int:
 
 
 def env_policy_features(
-    cameras: Sequence[str], image_size: int, state_dim: int, action_dim: int, per_frame_calibration: bool
+    cameras: Sequence[str],
+    image_size: int,
+    state_dim: int,
+    action_dim: int,
+    per_frame_calibration: bool,
+    env_state_dim: int = 0,
 ) -> tuple[dict[str, PolicyFeature], dict[str, str]]:
     """``(features, features_map)`` of an env config whose env observes ``pixels/<cam>`` images of
-    ``image_size``, ``agent_pos`` and, with ``per_frame_calibration``, each camera's calibration entries."""
+    ``image_size``, ``agent_pos``, with ``per_frame_calibration`` each camera's calibration entries and, when
+    ``env_state_dim`` > 0, an ``environment_state`` of that width (``observation.environment_state``, which
+    LeRobot's DP and ACT and OmniD condition on)."""
     features = {
         ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(action_dim,)),
         "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(state_dim,)),
@@ -122,6 +133,10 @@ def env_policy_features(
             ):
                 features[prefix + cam] = PolicyFeature(type=FeatureType.STATE, shape=(len(names),))
                 features_map[prefix + cam] = key
+    if env_state_dim:
+        # ENV, as LeRobot's dataset_to_policy_features types observation.environment_state.
+        features[ENV_STATE_OBS_KEY] = PolicyFeature(type=FeatureType.ENV, shape=(env_state_dim,))
+        features_map[ENV_STATE_OBS_KEY] = OBS_ENV_STATE
     return features, features_map
 
 
@@ -132,7 +147,8 @@ class OmniDEnvConfig(EnvConfig):
 
     The fields a user changes are ``task``, ``layout``, ``background`` and ``rig`` (the evaluation
     setting), ``cameras`` (must match the cameras the policy was trained on), ``image_size`` (must match
-    the training dataset's images). ``per_frame_calibration`` is on by default, so a policy trained on
+    the training dataset's images), ``task_onehot`` (must be on for a policy trained on datasets recorded
+    with ``--task-onehot``). ``per_frame_calibration`` is on by default, so a policy trained on
     ``omnid-record``'s per-frame calibration columns gets them; turning it off only drops keys that other
     policies ignore.
 
@@ -164,6 +180,11 @@ class OmniDEnvConfig(EnvConfig):
             and a translation in metres in the camera's OpenCV frame, ``T_cam_world' = [R(r) | t] @
             T_cam_world`` (``gym_omnid.camera_offsets``). Default: none.
             ``--env.camera_offsets='{cam_b: [0,0,2,0.02,0,0]}'``.
+        task_onehot: Add the task as a one-hot over ``gym_omnid.constants.TASKS`` (in that order) to the
+            observation, which ``lerobot-eval`` passes to the policy as ``observation.environment_state``
+            (6 values, FeatureType.ENV), the column ``omnid-record --task-onehot`` writes: a policy trained
+            on several tasks' datasets merged is told which task it is asked for. Off by default; needed by a
+            policy trained with the column. ``--env.task_onehot=true``.
         episode_length: Time limit of an episode, env steps (at ``fps`` steps per second).
         fps: Control rate, steps per second; fixed by the env (10 Hz).
         render_mode: Gymnasium render mode; ``"rgb_array"`` gives ``lerobot-eval`` its videos (a mosaic
@@ -180,6 +201,7 @@ class OmniDEnvConfig(EnvConfig):
     blackout_cameras: list[str] = field(default_factory=list)
     blackout_from_step: int = 0
     camera_offsets: dict[str, list[float]] = field(default_factory=dict)
+    task_onehot: bool = False
     episode_length: int = MAX_EPISODE_STEPS
     fps: int = CONTROL_FPS
     render_mode: str = "rgb_array"
@@ -207,6 +229,8 @@ class OmniDEnvConfig(EnvConfig):
             )
         offsets = check_camera_offsets(self.camera_offsets)  # its errors name camera_offsets and the camera
         self.camera_offsets = {cam: list(offset) for cam, offset in offsets.items()}
+        if not isinstance(self.task_onehot, bool):
+            raise ValueError(f"`task_onehot`: expected true or false, got {self.task_onehot!r}")
         check_positive_int("episode_length", self.episode_length)
         if self.fps != CONTROL_FPS:
             raise ValueError(
@@ -217,7 +241,12 @@ class OmniDEnvConfig(EnvConfig):
 
         # Derived from the fields above (a config loaded from JSON carries stale copies: rebuild).
         self.features, self.features_map = env_policy_features(
-            self.cameras, self.image_size, STATE_DIM, ACTION_DIM, self.per_frame_calibration
+            self.cameras,
+            self.image_size,
+            STATE_DIM,
+            ACTION_DIM,
+            self.per_frame_calibration,
+            env_state_dim=len(TASK_ONEHOT_NAMES) if self.task_onehot else 0,
         )
 
     @property
@@ -236,6 +265,7 @@ class OmniDEnvConfig(EnvConfig):
             "blackout_cameras": tuple(self.blackout_cameras),
             "blackout_from_step": self.blackout_from_step,
             "camera_offsets": {cam: tuple(offset) for cam, offset in self.camera_offsets.items()},
+            "task_onehot": self.task_onehot,
             "render_mode": self.render_mode,
             "max_episode_steps": self.episode_length,
         }

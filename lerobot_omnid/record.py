@@ -18,6 +18,12 @@ scrambled and perturbed controls, ``omnid-robustness``), so the benchmark record
 (``cam_wrist``) moves, so it is recorded only per frame. ``--per-frame-calibration`` names the default
 (it was opt-in before and is still accepted); the two flags exclude each other.
 
+``--task-onehot`` adds the column ``observation.environment_state``: the task as a one-hot over
+``gym_omnid.constants.TASKS`` (names: the task names), in every frame, as the env observes it. Its feature is
+the same for every task, so datasets of different tasks recorded with it merge into one multi-task dataset
+on which a policy that reads ``observation.environment_state`` (OmniD, LeRobot's DP and ACT) learns which
+task it is asked for; evaluate it with ``--env.task_onehot=true``.
+
 Example::
 
     MUJOCO_GL=egl omnid-record --task select_apple --episodes 50 --root data/omnid_select_apple
@@ -57,14 +63,16 @@ from gym_omnid.constants import (
     BACKGROUNDS,
     CAMERAS,
     DEFAULT_RIG,
+    ENV_STATE_OBS_KEY,
     LAYOUTS,
     MAX_IMAGE_SIDE,
     RIGS,
+    TASK_ONEHOT_NAMES,
     TASKS,
     WRIST_CAMERA,
 )
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
-from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES, OBS_STATE
+from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 from tqdm import tqdm
 
 from lerobot_omnid.calibration.frame_columns import (
@@ -193,9 +201,11 @@ def env_config(
     rig: str,
     per_frame_calibration: bool,
     episode_length: int | None,
+    task_onehot: bool = False,
 ) -> OmniDEnvConfig | OmniDMetaWorldEnvConfig:
     """The env config of a recording (``cameras``/``episode_length`` None: the suite's defaults). MetaWorld
-    has none of the omnid suite's variants: ``layout``, ``background`` and ``rig`` must be the defaults."""
+    has none of the omnid suite's variants: ``layout``, ``background`` and ``rig`` must be the defaults,
+    ``task_onehot`` False."""
     if suite not in SUITES:
         raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
     cameras = list(DEFAULT_CAMERAS[suite] if cameras is None else cameras)
@@ -209,12 +219,14 @@ def env_config(
             image_size=image_size,
             rig=rig,
             per_frame_calibration=per_frame_calibration,
+            task_onehot=task_onehot,
             **extra,
         )
     for name, value, default in (
         ("layout", layout, "id"),
         ("background", background, "id"),
         ("rig", rig, DEFAULT_RIG),
+        ("task_onehot", task_onehot, False),
     ):
         if value != default:
             raise ValueError(
@@ -242,10 +254,16 @@ def make_expert(suite: str, env: gym.Env) -> Any:
 
 
 def dataset_features(
-    env: gym.Env, cameras: Sequence[str], image_size: int, per_frame_calibration: bool = True
+    env: gym.Env,
+    cameras: Sequence[str],
+    image_size: int,
+    per_frame_calibration: bool = True,
+    task_onehot: bool = False,
 ) -> dict[str, dict]:
-    """LeRobot feature spec of the recorded dataset: videos, named state and action, and each camera's
-    calibration: static in the video feature's info, or per frame as columns."""
+    """LeRobot feature spec of the recorded dataset: videos, named state and action, each camera's
+    calibration (static in the video feature's info, or per frame as columns) and, with ``task_onehot``, the
+    task one-hot ``observation.environment_state``, whose spec does not depend on the task (datasets of
+    different tasks merge)."""
     unwrapped = env.unwrapped
     features: dict[str, dict] = {}
     for cam in cameras:
@@ -259,6 +277,9 @@ def dataset_features(
     features[ACTION] = {"dtype": "float32", "shape": (len(action_names),), "names": action_names}
     if per_frame_calibration:
         features.update(calibration_column_features(cameras))
+    if task_onehot:
+        names = list(TASK_ONEHOT_NAMES)
+        features[OBS_ENV_STATE] = {"dtype": "float32", "shape": (len(names),), "names": names}
     return features
 
 
@@ -277,12 +298,13 @@ def _run_expert_episode(
     dataset: LeRobotDataset,
     cameras: Sequence[str],
     per_frame_calibration: bool,
+    task_onehot: bool,
     seed: int,
     stop: _StopOnSigint,
     expert_factory: Callable[[gym.Env], Any],
 ) -> bool | None:
     """Roll out the expert once, adding every frame (with the calibration the env observed it with, when
-    ``per_frame_calibration``) to the dataset's episode buffer.
+    ``per_frame_calibration``, and its task one-hot, when ``task_onehot``) to the dataset's episode buffer.
 
     Returns the episode's success, or None when a stop was requested before it ended.
     """
@@ -297,6 +319,8 @@ def _run_expert_episode(
             if per_frame_calibration:
                 frame[extrinsics_key(cam)] = obs[f"{EXTRINSICS_OBS_PREFIX}{cam}"]
                 frame[intrinsics_key(cam)] = obs[f"{INTRINSICS_OBS_PREFIX}{cam}"]
+        if task_onehot:
+            frame[OBS_ENV_STATE] = obs[ENV_STATE_OBS_KEY]
         dataset.add_frame(frame)
         obs, _, terminated, truncated, info = env.step(action)
         if stop.requested:
@@ -318,6 +342,7 @@ def record_dataset(
     image_size: int = 128,
     rig: str = DEFAULT_RIG,
     per_frame_calibration: bool = True,
+    task_onehot: bool = False,
     seed: int = 0,
     max_attempts: int | None = None,
     episode_length: int | None = None,
@@ -337,6 +362,9 @@ def record_dataset(
             ``observation.extrinsics.<cam>`` / ``observation.intrinsics.<cam>`` (the default: datasets of
             different rigs merge, ``cam_wrist`` is possible); False writes it once in the image feature's
             info instead (the static form, ``--static-calibration``).
+        task_onehot: Write the task as a one-hot over ``TASKS`` in every frame, the column
+            ``observation.environment_state`` (omnid suite only), so that datasets of several tasks merge
+            into one on which a policy learns which task it is asked for.
         episodes: Successful episodes to save.
         repo_id: Dataset id; default ``local/omnid_<task>`` (``local/omnid_metaworld_<task>``).
         seed: Attempt ``i`` resets the env with ``seed + i``.
@@ -354,7 +382,16 @@ def record_dataset(
     if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < episodes:
         raise ValueError(f"max_attempts: expected an int >= episodes ({episodes}), got {max_attempts!r}")
     cfg = env_config(
-        suite, task, cameras, layout, background, image_size, rig, per_frame_calibration, episode_length
+        suite,
+        task,
+        cameras,
+        layout,
+        background,
+        image_size,
+        rig,
+        per_frame_calibration,
+        episode_length,
+        task_onehot,
     )
     check_wrist_calibration(cfg.cameras, per_frame_calibration, suite)
     repo_id = repo_id or default_repo_id(suite, task)
@@ -373,7 +410,7 @@ def record_dataset(
     attempts = saved = 0
     interrupted = False
     try:
-        features = dataset_features(env, cfg.cameras, cfg.image_size, cfg.per_frame_calibration)
+        features = dataset_features(env, cfg.cameras, cfg.image_size, cfg.per_frame_calibration, task_onehot)
         # Streaming: frames go to per-camera encoder threads (no PNG round trip). Their queues hold a
         # whole episode, so a frame is never dropped however slow the encoder is.
         dataset = LeRobotDataset.create(
@@ -398,6 +435,7 @@ def record_dataset(
                     dataset,
                     cfg.cameras,
                     cfg.per_frame_calibration,
+                    task_onehot,
                     seed + attempts - 1,
                     stop,
                     lambda env: make_expert(suite, env),
@@ -482,6 +520,11 @@ def _check_suite_arguments(parser: argparse.ArgumentParser, args: argparse.Names
         ):
             if value != default:
                 parser.error(f"{flag}: the metaworld suite has no variants; expected {default}, got {value}")
+        if args.task_onehot:
+            parser.error(
+                f"--task-onehot: the metaworld suite has no task one-hot (its tasks are not among "
+                f"{list(TASKS)}); expected it off, got it on"
+            )
 
 
 def _image_size(text: str) -> int:
@@ -565,6 +608,13 @@ def build_parser() -> argparse.ArgumentParser:
         "different rigs do not merge",
     )
     parser.add_argument(
+        "--task-onehot",
+        action="store_true",
+        help="write the task as a one-hot over the six tasks in every frame (column "
+        "observation.environment_state): datasets of different tasks then merge into one multi-task "
+        "dataset whose policies are told the task (evaluate with --env.task_onehot=true); omnid suite only",
+    )
+    parser.add_argument(
         "--seed", type=int, default=0, help="attempt i resets the env with seed + i (default: %(default)s)"
     )
     parser.add_argument(
@@ -638,6 +688,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         image_size=args.image_size,
         rig=args.rig,
         per_frame_calibration=args.per_frame_calibration,
+        task_onehot=args.task_onehot,
         seed=args.seed,
         max_attempts=args.max_attempts,
         push_to_hub=args.push_to_hub,

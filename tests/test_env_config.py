@@ -9,8 +9,9 @@ import draccus
 import numpy as np
 import pytest
 import torch
+from gym_omnid.constants import TASKS
 from gym_omnid.experts import make_expert
-from lerobot.configs import FeatureType
+from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env
 from lerobot.envs.utils import env_to_policy_features, preprocess_observation
@@ -86,6 +87,7 @@ def test_features_for_camera_subset():
         "blackout_cameras": (),
         "blackout_from_step": 0,
         "camera_offsets": {},
+        "task_onehot": False,
         "render_mode": "rgb_array",
         "max_episode_steps": 30,
     }
@@ -103,6 +105,7 @@ def test_features_for_camera_subset():
         ({"image_size": 0}, "image_size", "0"),
         ({"rig": "lab9"}, "rig", "'lab9'"),
         ({"per_frame_calibration": "yes"}, "per_frame_calibration", "'yes'"),
+        ({"task_onehot": 1}, "task_onehot", "1"),
         ({"blackout_cameras": ["cam_a"]}, "blackout_cameras", "['cam_a']"),
         ({"blackout_cameras": ["cam_b", "cam_b"]}, "blackout_cameras", "['cam_b', 'cam_b']"),
         ({"blackout_cameras": "cam_b"}, "blackout_cameras", "'cam_b'"),
@@ -239,3 +242,31 @@ def test_rig_and_per_frame_calibration_reach_the_policy_batch():
         vec.close()
     with pytest.raises(ValueError, match="cam_wrist moves with the arm"):
         cfg.camera_calibrations()
+
+
+def test_task_onehot_reaches_the_policy_batch():
+    """``--env.task_onehot``: lerobot-eval's batch carries the task as a one-hot over the six tasks, under
+    ``observation.environment_state`` typed ENV (what LeRobot's DP and ACT and OmniD condition on)."""
+
+    @dataclass
+    class Cli:
+        env: EnvConfig
+
+    args = ["--env.type=omnid", "--env.task=get_coffee", "--env.cameras=[cam_b]", "--env.image_size=32"]
+    cfg = draccus.parse(Cli, args=[*args, "--env.task_onehot=true", "--env.episode_length=2"]).env
+    assert cfg.gym_kwargs["task_onehot"] is True
+    assert cfg.features_map["environment_state"] == "observation.environment_state"
+    assert env_to_policy_features(cfg)["observation.environment_state"] == PolicyFeature(
+        FeatureType.ENV, (len(TASKS),)
+    )
+    assert "environment_state" not in OmniDEnvConfig(cameras=["cam_b"]).features  # off by default
+    expected = np.zeros((1, len(TASKS)), dtype=np.float32)
+    expected[0, TASKS.index("get_coffee")] = 1.0
+    vec = make_env(cfg, n_envs=1)["omnid"][0]
+    try:
+        obs, _ = vec.reset(seed=[0])
+        np.testing.assert_array_equal(preprocess_observation(obs)["observation.environment_state"], expected)
+        obs, *_ = vec.step(obs["agent_pos"][:, :ACTION_DIM].astype(np.float32))
+        np.testing.assert_array_equal(preprocess_observation(obs)["observation.environment_state"], expected)
+    finally:
+        vec.close()

@@ -4,6 +4,7 @@ CLIs on a recording: tests/e2e/test_omnid_record.py.)"""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import gym_omnid.experts
@@ -11,8 +12,12 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 import pytest
-from gym_omnid.constants import ACTION_NAMES, CAMERAS, STATE_NAMES
+from gym_omnid.constants import ACTION_NAMES, CAMERAS, STATE_NAMES, TASKS
 from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+from lerobot.envs.utils import env_to_policy_features
+from lerobot.scripts.lerobot_edit_dataset import edit_dataset
+from lerobot.utils.constants import OBS_ENV_STATE
+from lerobot.utils.feature_utils import dataset_to_policy_features
 from omnid_testing import assert_only_dataset_dirs, load_recording, record_five_cameras
 
 from lerobot_omnid.calibration.frame_columns import (
@@ -237,6 +242,61 @@ def test_static_calibration_flag_writes_the_feature_info(tmp_path):
     assert load_recording(root, "me/static").num_episodes == 1
 
 
+def test_task_onehot_datasets_of_two_tasks_share_features_and_merge(tmp_path, monkeypatch):
+    """``--task-onehot``: each frame's ``observation.environment_state`` is its task's one-hot, the feature
+    spec is the same for every task, and LeRobot's own ``lerobot-edit-dataset`` merge (its argument parsing
+    and merge, run in this process) makes one dataset of two tasks, each episode keeping its one-hot."""
+    tasks = ("select_apple", "add_condiment")
+    roots = [tmp_path / task for task in tasks]
+    for task, root in zip(tasks, roots, strict=True):
+        argv = [
+            "--task",
+            task,
+            "--episodes",
+            "1",
+            "--cameras",
+            "cam_b",
+            "--image-size",
+            "32",
+            "--task-onehot",
+        ]
+        assert main([*argv, "--root", str(root), "--repo-id", f"local/{task}"]) == 0
+    metas = [
+        LeRobotDatasetMetadata(f"local/{task}", root=root) for task, root in zip(tasks, roots, strict=True)
+    ]
+    assert metas[0].features == metas[1].features  # info of every feature included
+    assert metas[0].features[OBS_ENV_STATE] == {"dtype": "float32", "shape": (6,), "names": list(TASKS)}
+    # The dataset's feature is the one lerobot-eval gives a policy with --env.task_onehot=true.
+    env_cfg = OmniDEnvConfig(cameras=["cam_b"], image_size=32, task_onehot=True)
+    assert (
+        dataset_to_policy_features(metas[0].features)[OBS_ENV_STATE]
+        == env_to_policy_features(env_cfg)[OBS_ENV_STATE]
+    )
+    onehots = np.eye(len(TASKS), dtype=np.float32)
+    for task, root in zip(tasks, roots, strict=True):
+        column = np.stack(_read_data(root, [OBS_ENV_STATE])[OBS_ENV_STATE])
+        assert column.dtype == np.float32 and len(column) > 0
+        np.testing.assert_array_equal(column, np.broadcast_to(onehots[TASKS.index(task)], column.shape))
+
+    merged = tmp_path / "merged"
+    argv = [
+        "lerobot-edit-dataset",
+        "--new_repo_id=local/merged",
+        f"--new_root={merged}",
+        "--operation.type=merge",
+        f"--operation.repo_ids={[f'local/{task}' for task in tasks]}",
+        f"--operation.roots={[str(root) for root in roots]}",
+    ]
+    monkeypatch.setattr(sys, "argv", argv)
+    edit_dataset()
+    data = _read_data(merged, ["episode_index", OBS_ENV_STATE])
+    for episode, task in enumerate(tasks):
+        column = np.stack(data[data.episode_index == episode][OBS_ENV_STATE])
+        np.testing.assert_array_equal(column, np.broadcast_to(onehots[TASKS.index(task)], column.shape))
+    item = load_recording(merged, "local/merged")[len(data) - 1]
+    np.testing.assert_array_equal(item[OBS_ENV_STATE].numpy(), onehots[TASKS.index(tasks[1])])
+
+
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
@@ -255,6 +315,7 @@ def test_static_calibration_flag_writes_the_feature_info(tmp_path):
         ),
         (["--episodes", "3", "--max-attempts", "2"], ["--max-attempts", "3", "2"]),
         (["--push-to-hub"], ["--repo-id", "namespace", "local/omnid_select_apple"]),
+        (["--suite", "metaworld", "--task", "assembly-v3", "--task-onehot"], ["--task-onehot", "metaworld"]),
     ],
 )
 def test_bad_arguments_are_named(argv, expected, tmp_path, capsys):
@@ -287,4 +348,6 @@ def test_record_dataset_rejects_bad_arguments(tmp_path):
         record_dataset(tmp_path / "a", episodes=1, cameras=["cam_q"])
     with pytest.raises(ValueError, match="`task`: expected one of"):
         record_dataset(tmp_path / "a", episodes=1, task="make_tea")
+    with pytest.raises(ValueError, match="task_onehot: the metaworld suite has no variants; expected False"):
+        record_dataset(tmp_path / "a", suite="metaworld", task="assembly-v3", episodes=1, task_onehot=True)
     assert not (tmp_path / "a").exists()

@@ -2,7 +2,8 @@
 
 Importing this package registers ``gym_omnid/<task>`` for every task in ``TASKS``; variants are
 constructor kwargs (``cameras``, ``layout``, ``background``, ``image_size``, ``rig``,
-``per_frame_calibration``, ``blackout_cameras``, ``blackout_from_step``, ``camera_offsets``)::
+``per_frame_calibration``, ``blackout_cameras``, ``blackout_from_step``, ``camera_offsets``,
+``task_onehot``)::
 
     env = gymnasium.make("gym_omnid/select_apple", layout="position_ood", background="ood2")
 

@@ -24,6 +24,11 @@ TASKS = (  # the paper's tasks 0 and 1 first (few-shot and OOD settings use them
     "set_study_table",
     "texas_holdem",
 )
+# Task conditioning (the env's ``task_onehot``): the observation entry ENV_STATE_OBS_KEY (LeRobot's
+# ``environment_state``, which lerobot-eval passes to a policy as ``observation.environment_state``) is a
+# float32 one-hot over TASKS, entry i (named TASK_ONEHOT_NAMES[i]) set for TASKS[i].
+ENV_STATE_OBS_KEY = "environment_state"
+TASK_ONEHOT_NAMES = TASKS
 CAMERAS = ("cam_a", "cam_b", "cam_c", "cam_d", "cam_e")
 TRAIN_CAMERAS = ("cam_b", "cam_c", "cam_d", "cam_e")  # cam_a is the unseen view for few-shot
 # Graded position layouts (the position-shift curve): key objects at an L-inf distance outside the ID

@@ -27,6 +27,7 @@ from gym_omnid.constants import (
     CONTROL_FPS,
     DEFAULT_IMAGE_SIZE,
     DEFAULT_RIG,
+    ENV_STATE_OBS_KEY,
     FINGER_TRAVEL,
     HOME_JOINTS,
     LAYOUTS,
@@ -42,6 +43,7 @@ from gym_omnid.constants import (
     STATE_POS_BOUND,
     STATE_ROT_BOUND,
     TABLE_TEXTURE_SIZE,
+    TASK_ONEHOT_NAMES,
     TASKS,
 )
 from gym_omnid.ik import DampedLeastSquaresIK
@@ -49,7 +51,7 @@ from gym_omnid.rigs import RIG_PLACEMENTS
 from gym_omnid.robot import FINGER_JOINTS, TCP_SITE
 from gym_omnid.rotations import matrix_from_rot6d, rot6d_from_matrix
 from gym_omnid.scene import TABLE_TEXTURE, build_mjcf
-from gym_omnid.tasks import Task, make_task
+from gym_omnid.tasks import Task, make_task, task_onehot
 from gym_omnid.textures import BACKGROUND_TEXTURES
 
 RENDER_MODES = ("rgb_array",)
@@ -143,7 +145,10 @@ class OmniDEnv(gym.Env):
     state layout of ``state_names`` (TCP position m, TCP 6D orientation, gripper closure in [0, 1],
     arm joint positions rad). With ``per_frame_calibration`` also, for every observed camera,
     ``"extrinsics.<cam>"`` (16,) and ``"intrinsics.<cam>"`` (9,) float32: ``T_cam_world`` and ``K`` of
-    that frame, row-major (``camera_calibration(cam)`` when the images were rendered).
+    that frame, row-major (``camera_calibration(cam)`` when the images were rendered). With ``task_onehot``
+    also ``"environment_state"`` (``ENV_STATE_OBS_KEY``): ``(len(TASKS),) float32``, 1 at the index of
+    ``task`` in ``TASKS`` (``TASK_ONEHOT_NAMES``), 0 elsewhere, which tells a policy trained on several
+    tasks which one it is asked for.
     Action: ``(ACTION_DIM,) float32``, an absolute TCP target in the world frame: position (m), 6D
     orientation (first two columns of ``world_R_tcp``), gripper command in [0, 1] (0 open, 1 closed);
     applied through damped-least-squares IK to the joint-position actuators, then
@@ -167,6 +172,8 @@ class OmniDEnv(gym.Env):
             :mod:`gym_omnid.camera_offsets`): a bumped camera. ``camera_calibration`` is the moved camera's.
         rig: placements of the fixed cameras, one of ``RIGS`` (see :mod:`gym_omnid.rigs`).
         per_frame_calibration: add each observed camera's calibration to every observation.
+        task_onehot: add the task as a one-hot over ``TASKS`` (``"environment_state"``) to every
+            observation.
         render_mode: ``"rgb_array"`` (``render()`` returns a mosaic of the observed cameras) or None.
     """
 
@@ -185,6 +192,7 @@ class OmniDEnv(gym.Env):
         blackout_cameras: Sequence[str] = (),
         blackout_from_step: int = 0,
         camera_offsets: Mapping[str, Sequence[float]] | None = None,
+        task_onehot: bool = False,
     ) -> None:
         self.task: str = _choice("task", task, TASKS)
         self.cameras: tuple[str, ...] = _cameras(cameras)
@@ -198,6 +206,9 @@ class OmniDEnv(gym.Env):
         if not isinstance(per_frame_calibration, bool):
             raise ValueError(f"per_frame_calibration: expected True or False, got {per_frame_calibration!r}")
         self.per_frame_calibration = per_frame_calibration
+        if not isinstance(task_onehot, bool):
+            raise ValueError(f"task_onehot: expected True or False, got {task_onehot!r}")
+        self.task_onehot = task_onehot
         self.render_mode = _choice("render_mode", render_mode, (*RENDER_MODES, None))
         self.state_names: list[str] = list(STATE_NAMES)
         self.action_names: list[str] = list(ACTION_NAMES)
@@ -232,6 +243,8 @@ class OmniDEnv(gym.Env):
             for cam in self.cameras:
                 for key, value in calibration_observation(cam, self.camera_calibration(cam)).items():
                     obs_spaces[key] = spaces.Box(-np.inf, np.inf, value.shape, dtype=np.float32)
+        if self.task_onehot:
+            obs_spaces[ENV_STATE_OBS_KEY] = spaces.Box(0, 1, (len(TASK_ONEHOT_NAMES),), dtype=np.float32)
         self.observation_space = spaces.Dict(obs_spaces)
         low = np.array([*ACTION_POS_LOW, *([-1.0] * 6), 0.0], dtype=np.float32)
         high = np.array([*ACTION_POS_HIGH, *([1.0] * 6), 1.0], dtype=np.float32)
@@ -376,7 +389,7 @@ class OmniDEnv(gym.Env):
     def _observation(self) -> dict:
         """Render the cameras and assemble ``{"pixels", "agent_pos"}`` in the ``state_names`` layout (the
         ``blackout_cameras`` black from ``blackout_from_step`` on), with the cameras' calibration entries
-        when ``per_frame_calibration``."""
+        when ``per_frame_calibration`` and the task one-hot when ``task_onehot``."""
         self._last_pixels = self._render_cameras()
         tcp_xyz, world_R_tcp = self.tcp_pose()
         finger_gap = float(np.sum(self.data.qpos[self._finger_qpos]))
@@ -394,4 +407,6 @@ class OmniDEnv(gym.Env):
         if self.per_frame_calibration:
             for cam in self.cameras:
                 obs.update(calibration_observation(cam, self.camera_calibration(cam)))
+        if self.task_onehot:
+            obs[ENV_STATE_OBS_KEY] = task_onehot(self.task)
         return obs

@@ -71,8 +71,7 @@ def main() -> None:
 
     pix_T_cam, cam_T_world = policy.camera_matrices(1, tuple(images.shape[-2:]))
     encoder = model.ofg if config.use_ofg else model.pool
-    condition_dim = model.global_cond_dim // config.n_obs_steps - config.robot_state_feature.shape[0]
-    head = nn.Sequential(nn.Linear(condition_dim, 256), nn.ReLU(), nn.Linear(256, 2))
+    head = nn.Sequential(nn.Linear(model.image_cond_dim, 256), nn.ReLU(), nn.Linear(256, 2))
     parameters = [*model.backbone.parameters(), *encoder.parameters(), *head.parameters()]
     optimizer = torch.optim.AdamW(parameters, lr=args.lr, betas=(0.95, 0.999), weight_decay=1e-6)
 

@@ -8,6 +8,7 @@ from typing import Any
 
 from lerobot.configs import FeatureType, NormalizationMode, PreTrainedConfig
 from lerobot.optim import AdamWConfig, DiffuserSchedulerConfig
+from lerobot.utils.constants import OBS_ENV_STATE
 from lerobot.utils.feature_utils import dataset_to_policy_features
 
 from lerobot_omnid.calibration.frame_columns import extrinsics_key, intrinsics_key, is_calibration_key
@@ -49,7 +50,10 @@ class OmniDConfig(PreTrainedConfig):
     frame), ``resize_shape`` and the model sizes (``d_model``, ``num_layers``, ``volume_shape``,
     ``down_dims``) to fit the hardware, ``num_inference_steps`` with ``noise_scheduler_type="DDIM"`` for
     fast evaluation. ``camera_calibration`` is filled from the dataset when the policy is made; every
-    ``observation.images.*`` input needs an entry.
+    ``observation.images.*`` input needs an entry. An ``observation.environment_state`` input (FeatureType
+    ENV; e.g. the task one-hot of ``omnid-record --task-onehot``, so that one policy trained on several tasks
+    is told which one it is asked for) is appended to the state in the diffusion head's condition at every
+    observation step, as LeRobot's DiffusionPolicy does; without one the model is unchanged.
 
     Args:
         n_obs_steps: Number of observation steps (current and previous) the policy conditions on.
@@ -59,6 +63,9 @@ class OmniDConfig(PreTrainedConfig):
         normalization_mapping: Normalisation per feature type. Images are not normalised with dataset
             statistics (IDENTITY): the backbone normalises with fixed ImageNet statistics, so a camera that
             was not in the training set (fine-tuning, evaluation on a new view) is handled like the others.
+            Nor is the env state (ENV, IDENTITY): a task one-hot is already in [0, 1], and MIN_MAX would
+            map its columns that are constant in a single-task dataset to -1 (the set one and the unset
+            ones alike) and a value outside their one-point range to about 2 / eps.
         camera_calibration: Per image feature key, the calibration dict of
             :class:`lerobot_omnid.calibration.schema.CameraCalibration` (K, T_cam_world, image_size).
             Copied from the dataset's feature info by ``set_dataset_feature_metadata``; saved in
@@ -178,6 +185,7 @@ class OmniDConfig(PreTrainedConfig):
     normalization_mapping: dict[str, NormalizationMode] = field(
         default_factory=lambda: {
             "VISUAL": NormalizationMode.IDENTITY,
+            "ENV": NormalizationMode.IDENTITY,
             "STATE": NormalizationMode.MIN_MAX,
             "ACTION": NormalizationMode.MIN_MAX,
         }
@@ -459,6 +467,12 @@ class OmniDConfig(PreTrainedConfig):
             raise ValueError("OmniD needs at least one `observation.images.*` input feature.")
         if self.robot_state_feature is None:
             raise ValueError("OmniD needs `observation.state` among the input features.")
+        env = {key: ft.shape for key, ft in self.input_features.items() if ft.type is FeatureType.ENV}
+        if env and (list(env) != [OBS_ENV_STATE] or len(env[OBS_ENV_STATE]) != 1):
+            raise ValueError(
+                f"OmniD reads the env state from one vector feature `{OBS_ENV_STATE}` of shape (De,); "
+                f"got the ENV input features {env}"
+            )
         for key, ft in self.image_features.items():
             if len(ft.shape) != 3 or ft.shape[0] != 3:
                 raise ValueError(f"{key}: expected an RGB image feature of shape (3, H, W), got {ft.shape}")

@@ -1,6 +1,7 @@
 """OmniD policy: shared ResNet -> Omni-Feature Generator -> LeRobot's conditional 1D UNet diffusion head.
 
-Shape legend: B batch, T observation steps, S cameras, H W image, Da action dim, Ds state dim.
+Shape legend: B batch, T observation steps, S cameras, H W image, Da action dim, Ds state dim, De env state
+dim (``observation.environment_state``, e.g. a task one-hot; absent unless the inputs have it).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from huggingface_hub import ModelCard
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionConditionalUnet1d, SpatialSoftmax
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.policies.utils import get_output_shape, populate_queues
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 from torch import Tensor, nn
 
 from lerobot_omnid.calibration.frame_columns import (
@@ -93,7 +94,9 @@ class OmniDPolicy(PreTrainedPolicy):
     """OmniD (Mao et al., 2025): multi-view BEV features by deformable attention + diffusion action head.
 
     The cameras used are ``config.image_features``; each needs an entry in ``config.camera_calibration``.
-    The model itself does not depend on which or how many cameras there are.
+    The model itself does not depend on which or how many cameras there are. With an
+    ``observation.environment_state`` input (``config.env_state_feature``), it conditions on it at every
+    observation step, as LeRobot's DiffusionPolicy does.
     """
 
     config_class = OmniDConfig
@@ -131,7 +134,12 @@ class OmniDPolicy(PreTrainedPolicy):
 
     def reset(self) -> None:
         """Clear observation and action queues. Called on ``env.reset()``."""
-        observed = (OBS_STATE, OBS_IMAGES, *(FRAME_MATRICES if self.config.use_ofg else ()))
+        observed = (
+            OBS_STATE,
+            OBS_IMAGES,
+            *(FRAME_MATRICES if self.config.use_ofg else ()),
+            *((OBS_ENV_STATE,) if self.config.env_state_feature else ()),
+        )
         self._queues = {key: deque(maxlen=self.config.n_obs_steps) for key in observed}
         self._queues[ACTION] = deque(maxlen=self.config.n_action_steps)
 
@@ -195,7 +203,8 @@ class OmniDPolicy(PreTrainedPolicy):
         )
 
     def _stack_inputs(self, batch: dict[str, Tensor], time_dim: bool) -> dict[str, Tensor]:
-        """Validate the inputs and stack the cameras: images (B, [T,] S, 3, H, W), state (B, [T,] Ds)."""
+        """Validate the inputs and stack the cameras: images (B, [T,] S, 3, H, W), state (B, [T,] Ds) and,
+        when the policy has one, the env state (B, [T,] De)."""
         image_ndim = 5 if time_dim else 4
         if OBS_STATE not in batch:
             raise KeyError(f"`{OBS_STATE}` is missing from the batch (keys: {sorted(batch)})")
@@ -228,9 +237,26 @@ class OmniDPolicy(PreTrainedPolicy):
                 )
             images = [resize_images(img, tuple(self.config.resize_shape)) for img in images]
         stacked = {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
+        if self.config.env_state_feature:
+            stacked[OBS_ENV_STATE] = self._env_state(batch, state.shape[:-1])
         if self.config.use_ofg:
             stacked.update(zip(FRAME_MATRICES, self.frame_matrices(batch, sizes), strict=True))
         return stacked
+
+    def _env_state(self, batch: dict[str, Tensor], lead: torch.Size) -> Tensor:
+        """``observation.environment_state`` of the batch, (*lead, De), checked."""
+        if OBS_ENV_STATE not in batch:
+            raise KeyError(
+                f"`{OBS_ENV_STATE}` is missing from the batch: the policy was made with it (the omnid envs' "
+                f"task one-hot: --env.task_onehot=true); keys: {sorted(batch)}"
+            )
+        env_state = batch[OBS_ENV_STATE]
+        expected = (*lead, self.config.env_state_feature.shape[0])
+        if tuple(env_state.shape) != expected:
+            raise ValueError(f"`{OBS_ENV_STATE}`: expected shape {expected}, got {tuple(env_state.shape)}")
+        if not torch.isfinite(env_state).all():
+            raise ValueError(f"`{OBS_ENV_STATE}` contains NaN or infinite values")
+        return env_state
 
     def frame_matrices(
         self, batch: dict[str, Tensor], sizes: tuple[tuple[int, int], ...]
@@ -307,14 +333,16 @@ class OmniDPolicy(PreTrainedPolicy):
         self._checked_sizes = sizes
 
     def _condition(self, stacked: dict[str, Tensor], augment: bool = False) -> Tensor:
-        images = stacked[OBS_IMAGES]
+        images, env_state = stacked[OBS_IMAGES], stacked.get(OBS_ENV_STATE)
         if not self.config.use_ofg:
-            return self.model.global_condition(images, stacked[OBS_STATE], None, None)
+            return self.model.global_condition(images, stacked[OBS_STATE], None, None, env_state=env_state)
         pix_T_cam, cam_T_world = (stacked[k] for k in FRAME_MATRICES)  # B, T, S, ...
         camera_mask = None
         if augment:
             images, pix_T_cam, cam_T_world, camera_mask = self._augment(images, pix_T_cam, cam_T_world)
-        return self.model.global_condition(images, stacked[OBS_STATE], pix_T_cam, cam_T_world, camera_mask)
+        return self.model.global_condition(
+            images, stacked[OBS_STATE], pix_T_cam, cam_T_world, camera_mask, env_state=env_state
+        )
 
     def _augment(
         self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
@@ -386,7 +414,8 @@ class OmniDPolicy(PreTrainedPolicy):
 
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], noise: Tensor | None = None) -> Tensor:
-        """One action (B, Da) for the current observation (images (B, 3, H, W), state (B, Ds)).
+        """One action (B, Da) for the current observation (images (B, 3, H, W), state (B, Ds), env state
+        (B, De) when the policy has one).
 
         ``n_obs_steps`` observations are queued; a chunk of ``horizon`` actions is generated whenever
         the action queue is empty and its ``n_action_steps`` first actions from the current step are
@@ -400,8 +429,8 @@ class OmniDPolicy(PreTrainedPolicy):
         return self._queues[ACTION].popleft()
 
     def forward(self, batch: dict[str, Tensor]) -> tuple[Tensor, None]:
-        """Diffusion loss of a training batch: images (B, T, 3, H, W), state (B, T, Ds), action
-        (B, horizon, Da), action_is_pad (B, horizon)."""
+        """Diffusion loss of a training batch: images (B, T, 3, H, W), state (B, T, Ds), env state (B, T, De)
+        when the policy has one, action (B, horizon, Da), action_is_pad (B, horizon)."""
         stacked = self._stack_inputs(batch, time_dim=True)
         if ACTION not in batch:
             raise KeyError(f"`{ACTION}` is missing from the training batch (keys: {sorted(batch)})")
@@ -441,7 +470,11 @@ class OmniDModel(nn.Module):
                 nn.ReLU(),
             )
             image_cond_dim = num_kp * 2 * len(config.image_features)
+        self.image_cond_dim = image_cond_dim
+        # Every observation step carries the state and the env state (if any), as in LeRobot's DP.
         state_dim = config.robot_state_feature.shape[0]
+        if config.env_state_feature:
+            state_dim += config.env_state_feature.shape[0]
         image_steps = 1 if config.fuse_last_step_only else config.n_obs_steps
         self.global_cond_dim = image_cond_dim * image_steps + state_dim * config.n_obs_steps
         self.unet = DiffusionConditionalUnet1d(config, global_cond_dim=self.global_cond_dim)
@@ -505,8 +538,14 @@ class OmniDModel(nn.Module):
         pix_T_cam: Tensor | None,
         cam_T_world: Tensor | None,
         camera_mask: Tensor | None = None,
+        env_state: Tensor | None = None,
     ) -> Tensor:
-        """images (B, T, S, 3, H, W), state (B, T, Ds) -> (B, global_cond_dim)."""
+        """images (B, T, S, 3, H, W), state (B, T, Ds), env_state (B, T, De) or None -> (B, global_cond_dim).
+
+        Per observation step: the image condition (the last step's only with ``fuse_last_step_only``), the
+        state and the env state."""
+        if env_state is not None:
+            state = torch.cat([state, env_state.to(state.dtype)], dim=-1)  # B, T, Ds + De
         if self.config.fuse_last_step_only:  # B, T, ... -> B, 1, ...: the state keeps every step
             images = images[:, -1:]
             if pix_T_cam is not None and pix_T_cam.ndim == 5:

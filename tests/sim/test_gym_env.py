@@ -9,9 +9,16 @@ import gym_omnid
 import gymnasium as gym
 import numpy as np
 import pytest
-from gym_omnid.constants import FINGER_TRAVEL, ID_HALF_EXTENT, POSITION_BANDS
+from gym_omnid.constants import (
+    ENV_STATE_OBS_KEY,
+    FINGER_TRAVEL,
+    ID_HALF_EXTENT,
+    POSITION_BANDS,
+    TASK_ONEHOT_NAMES,
+)
 from gym_omnid.env import OmniDEnv
 from gym_omnid.experts import waypoint_action
+from gym_omnid.tasks import task_onehot
 from gym_omnid.tasks.base import offset_band, sample_layout
 from gymnasium.utils.env_checker import check_env
 
@@ -277,6 +284,7 @@ def test_image_size(make_env, size, shape) -> None:
         ({"image_size": (64, 64, 3)}, "image_size"),
         ({"image_size": 64.0}, "image_size"),
         ({"render_mode": "human"}, "render_mode"),
+        ({"task_onehot": "yes"}, "task_onehot"),
     ],
 )
 def test_bad_kwargs_raise_value_error_naming_the_field(kwargs: dict, field: str) -> None:
@@ -285,6 +293,33 @@ def test_bad_kwargs_raise_value_error_naming_the_field(kwargs: dict, field: str)
     with pytest.raises(ValueError, match=rf"^{field}: expected .* got ") as err:
         OmniDEnv(**kwargs)
     assert repr(bad) in str(err.value) or str(bad) in str(err.value)
+
+
+def test_task_onehot_helper() -> None:
+    assert TASK_ONEHOT_NAMES == gym_omnid.TASKS
+    onehots = np.stack([task_onehot(task) for task in gym_omnid.TASKS])
+    assert onehots.dtype == np.float32
+    np.testing.assert_array_equal(onehots, np.eye(len(gym_omnid.TASKS)))
+    with pytest.raises(ValueError, match=r"^task: expected one of .* got 'make_tea'"):
+        task_onehot("make_tea")
+
+
+@pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # absolute poses in metres
+@pytest.mark.parametrize("task", ["select_apple", "texas_holdem"])
+def test_task_onehot_observation(make_env, task: str) -> None:
+    env = make_env(task, cameras=["cam_b"], image_size=32, task_onehot=True)
+    expected = np.eye(len(gym_omnid.TASKS), dtype=np.float32)[gym_omnid.TASKS.index(task)]
+    obs, _ = env.reset(seed=0)
+    for _ in range(2):  # the observation of reset, then of a step
+        assert obs in env.observation_space
+        assert obs[ENV_STATE_OBS_KEY].dtype == np.float32
+        np.testing.assert_array_equal(obs[ENV_STATE_OBS_KEY], expected)
+        obs, *_ = env.step(env.action_space.sample())
+    space = env.observation_space[ENV_STATE_OBS_KEY]
+    assert space.shape == (len(gym_omnid.TASKS),) and (space.low == 0).all() and (space.high == 1).all()
+    check_env(env)
+    # Off by default: the observation every existing dataset was recorded with.
+    assert ENV_STATE_OBS_KEY not in make_env(task, cameras=["cam_b"], image_size=32).reset(seed=0)[0]
 
 
 def test_bad_action_shape(make_env) -> None:

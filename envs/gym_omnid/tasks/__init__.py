@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+
+from gym_omnid.constants import TASK_ONEHOT_NAMES
 from gym_omnid.tasks.add_condiment import AddCondiment
 from gym_omnid.tasks.base import Task
 from gym_omnid.tasks.get_coffee import GetCoffee
@@ -28,4 +31,13 @@ def make_task(name: str) -> Task:
     raise ValueError(f"task: expected one of {[cls.name for cls in TASK_CLASSES]}, got {name!r}")
 
 
-__all__ = ["TASK_CLASSES", "Task", "make_task"]
+def task_onehot(name: str) -> np.ndarray:
+    """(len(TASK_ONEHOT_NAMES),) float32: 1 at the index of task ``name`` in ``TASK_ONEHOT_NAMES``, else 0."""
+    if name not in TASK_ONEHOT_NAMES:
+        raise ValueError(f"task: expected one of {list(TASK_ONEHOT_NAMES)}, got {name!r}")
+    onehot = np.zeros(len(TASK_ONEHOT_NAMES), dtype=np.float32)
+    onehot[TASK_ONEHOT_NAMES.index(name)] = 1.0
+    return onehot
+
+
+__all__ = ["TASK_CLASSES", "Task", "make_task", "task_onehot"]
