@@ -9,8 +9,9 @@ The protocol (docs/benchmark.md#a-new-camera-its-protocol), fixed before any of 
    (the benchmark's run) and ``single_camera``, trained with half of its samples fused from one camera
    (``--policy.single_camera_rate=0.5``), so that the OFG learns to lift the scene from a single view.
 3. *Hypotheses* (``HYPOTHESES``): a pre-trained model fine-tuned on the camera-A episodes for some steps at
-   some learning rate: the paper's recipe at CPU size (``mini``, 200 steps, the benchmark's), longer
-   fine-tuning (1000 steps), longer at a lower learning rate (1e-4), and longer from ``single_camera``.
+   some learning rate, some parts frozen: the paper's recipe at CPU size (``mini``, 200 steps, the
+   benchmark's), longer fine-tuning (1000 steps), longer at a lower learning rate (1e-4), longer from
+   ``single_camera``, longer with the diffusion head frozen, longer with the backbone frozen.
    Zero-shot (no fine-tuning) each pre-trained model is evaluated on camera A too.
 4. *Validation*, never reported as a result: ``lerobot-eval`` with camera A only, ID, env seeds
    ``VALIDATION_SEED`` ... (``VALIDATION_EPISODES``), disjoint from every other seed set; the policy reads
@@ -34,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS
@@ -60,11 +62,28 @@ PRETRAINED = {  # name: options added to mini's OmniD
     "mini": (),
     "single_camera": ("--policy.single_camera_rate=0.5",),
 }
-HYPOTHESES = {  # name: (pre-trained model, fine-tuning steps, learning rate or None for mini's)
-    "paper": ("mini", MINI.finetune_steps, None),
-    "long": ("mini", 1000, None),
-    "long_low_lr": ("mini", 1000, 1e-4),
-    "single_camera_long": ("single_camera", 1000, None),
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A fine-tuning recipe: from which pre-trained model, how many steps, at which learning rate (None:
+    mini's) and with which parts frozen (``--policy.frozen_modules``)."""
+
+    pretrained: str
+    steps: int
+    lr: float | None = None
+    frozen: tuple[str, ...] = ()
+
+
+HYPOTHESES = {
+    "paper": Hypothesis("mini", MINI.finetune_steps),
+    "long": Hypothesis("mini", 1000),
+    "long_low_lr": Hypothesis("mini", 1000, lr=1e-4),
+    "single_camera_long": Hypothesis("single_camera", 1000),
+    # The plane is meant to be camera-agnostic: keep what maps it to actions, adapt only the lifting.
+    "long_frozen_head": Hypothesis("mini", 1000, frozen=("head",)),
+    # The ResNet's features are generic: adapt the OFG and the head only.
+    "long_frozen_backbone": Hypothesis("mini", 1000, frozen=("backbone",)),
 }
 VALIDATION_SEED = 70_000
 VALIDATION_EPISODES = 20
@@ -115,16 +134,18 @@ def pretrain(out: Path, name: str) -> list[str]:
 
 
 def finetune(out: Path, hypothesis: str) -> list[str]:
-    pretrained, steps, lr = HYPOTHESES[hypothesis]
-    flags = [f"--policy.path={pretrained_dir(out, pretrained) / CHECKPOINT}", "--policy.device=cpu"]
+    recipe = HYPOTHESES[hypothesis]
+    flags = [f"--policy.path={pretrained_dir(out, recipe.pretrained) / CHECKPOINT}", "--policy.device=cpu"]
     flags += ["--policy.push_to_hub=false", *(flag for flag, _ in finetune_flags("omnid", MINI))]
-    if lr is not None:
-        flags.append(f"--policy.optimizer_lr={lr:g}")
+    if recipe.lr is not None:
+        flags.append(f"--policy.optimizer_lr={recipe.lr:g}")
+    if recipe.frozen:
+        flags.append(f"--policy.frozen_modules=[{','.join(recipe.frozen)}]")
     return commands.train_command(
         out / "data" / FEWSHOT_DATA,
         finetuned_dir(out, hypothesis),
         flags,
-        steps,
+        recipe.steps,
         MINI.batch_size,
         seed=TRAIN_SEED,
     )
@@ -167,9 +188,9 @@ def protocol(out: Path) -> list[Run]:
         runs.append(
             Run(f"validation/{model}", "eval", tuple(cmd), validation_dir(out, model), (trained.name,))
         )
-    for hypothesis, (pretrained, _, _) in HYPOTHESES.items():
+    for hypothesis, recipe in HYPOTHESES.items():
         name = str(finetuned_dir(out, hypothesis).relative_to(out))
-        needs = (str(pretrained_dir(out, pretrained).relative_to(out)), runs[1].name)
+        needs = (str(pretrained_dir(out, recipe.pretrained).relative_to(out)), runs[1].name)
         runs.append(
             Run(name, "train", tuple(finetune(out, hypothesis)), finetuned_dir(out, hypothesis), needs)
         )
@@ -185,7 +206,7 @@ def select(results: dict[str, tuple[int, int]]) -> str:
     fine-tuning steps, then the order of ``HYPOTHESES``."""
     best = max(results[h][0] for h in HYPOTHESES)
     close = [h for h in HYPOTHESES if results[h][0] >= best - TIE_MARGIN]
-    return min(close, key=lambda h: HYPOTHESES[h][1])
+    return min(close, key=lambda h: HYPOTHESES[h].steps)
 
 
 def summarise(out: Path, runs: Sequence[Run]) -> dict:
@@ -206,7 +227,7 @@ def summarise(out: Path, runs: Sequence[Run]) -> dict:
         "task": TASK0,
         "validation_seed": VALIDATION_SEED,
         "validation_episodes": VALIDATION_EPISODES,
-        "hypotheses": {h: {"pretrained": p, "steps": s, "lr": lr} for h, (p, s, lr) in HYPOTHESES.items()},
+        "hypotheses": {h: asdict(recipe) for h, recipe in HYPOTHESES.items()},
         "results": results,
         "selected": select(validated) if len(validated) == len(HYPOTHESES) else None,
     }
@@ -229,7 +250,9 @@ def write_report(summary: dict, path: Path) -> None:
         hypothesis = summary["hypotheses"].get(model)
         if hypothesis:
             lr = "mini's lr" if hypothesis["lr"] is None else f"lr {hypothesis['lr']:g}"
-            pretrained, tuning = hypothesis["pretrained"], f"{hypothesis['steps']} steps, {lr}"
+            frozen = ", ".join(hypothesis.get("frozen", ()))
+            pretrained = hypothesis["pretrained"]
+            tuning = f"{hypothesis['steps']} steps, {lr}" + (f", {frozen} frozen" if frozen else "")
         else:
             pretrained, tuning = model.removeprefix("zero_shot_"), "none (zero-shot)"
         chosen = "**yes**" if model == summary["selected"] else ""

@@ -25,6 +25,8 @@ from lerobot_omnid.keys import image_key
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
+FREEZABLE = ("backbone", "ofg", "head")
+"""Parts of the model that ``frozen_modules`` can keep from training."""
 NOISE_SCHEDULERS = ("DDPM", "DDIM")
 PREDICTION_TYPES = ("epsilon", "sample")
 OFG_ONLY_OPTIONS = {
@@ -175,6 +177,10 @@ class OmniDConfig(PreTrainedConfig):
         do_mask_loss_for_padding: Mask the loss on copy-padded actions at episode ends.
         optimizer_*: AdamW settings (paper: AdamW, lr 1e-4).
         scheduler_name, scheduler_warmup_steps: cosine schedule with 500 warm-up steps (paper).
+        frozen_modules: Parts not trained, of ``FREEZABLE``: "backbone" (the ResNet), "ofg" (the
+            Omni-Feature Generator, or the per-camera keypoints without it) and "head" (the diffusion
+            UNet). For fine-tuning: on a new camera, a head frozen keeps what was learnt from the plane to the
+            actions, and only the lifting adapts. Default: none.
     """
 
     # Inputs / outputs.
@@ -258,6 +264,7 @@ class OmniDConfig(PreTrainedConfig):
     optimizer_weight_decay: float = 1e-6
     scheduler_name: str = "cosine"
     scheduler_warmup_steps: int = 500
+    frozen_modules: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         """Validate the fields (errors name the field, what was expected and what was given) and bring them
@@ -341,6 +348,13 @@ class OmniDConfig(PreTrainedConfig):
                         f"augments the images and calibrations the OFG fuses, and the 'w/o OFG' ablation "
                         f"has no OFG, so it would have no effect"
                     )
+        self.frozen_modules = tuple(self.frozen_modules)
+        unknown = [m for m in self.frozen_modules if m not in FREEZABLE]
+        if unknown or len(set(self.frozen_modules)) == len(FREEZABLE):
+            raise ValueError(
+                f"`frozen_modules`: expected some of {list(FREEZABLE)} (not all: something must train), got "
+                f"{list(self.frozen_modules)}"
+            )
         self.volume_bounds = tuple(tuple(float(v) for v in b) for b in self.volume_bounds)
         self.volume_shape = tuple(int(n) for n in self.volume_shape)
         try:

@@ -129,8 +129,9 @@ class OmniDPolicy(PreTrainedPolicy):
         card.content = card.content + omnid_card_section(self.config, results)
         return card
 
-    def get_optim_params(self) -> dict:
-        return self.model.parameters()
+    def get_optim_params(self) -> list[nn.Parameter]:
+        """The trained weights: all but those of ``config.frozen_modules``."""
+        return [p for p in self.model.parameters() if p.requires_grad]
 
     def reset(self) -> None:
         """Clear observation and action queues. Called on ``env.reset()``."""
@@ -489,6 +490,22 @@ class OmniDModel(nn.Module):
             prediction_type=config.prediction_type,
         )
         self.num_inference_steps = config.num_inference_steps or config.num_train_timesteps
+        for name in config.frozen_modules:
+            self.part(name).requires_grad_(False)
+
+    def part(self, name: str) -> nn.Module:
+        """One of the parts ``frozen_modules`` names: "backbone", "ofg" (the keypoint pooling without an
+        OFG) or "head"."""
+        parts = {"backbone": self.backbone, "ofg": self.ofg if self.config.use_ofg else self.pool}
+        return {**parts, "head": self.unet}[name]
+
+    def train(self, mode: bool = True) -> OmniDModel:
+        """As ``nn.Module.train``, but frozen parts stay in eval mode (their normalisation statistics and
+        dropout as at inference)."""
+        super().train(mode)
+        for name in self.config.frozen_modules:
+            self.part(name).eval()
+        return self
 
     def encode_images(
         self,

@@ -75,25 +75,24 @@ def test_validation_sees_camera_a_alone_on_seeds_of_its_own(tmp_path):
 @pytest.mark.parametrize(
     ("successes", "selected"),
     [
-        (
-            {"paper": 3, "long": 9, "long_low_lr": 4, "single_camera_long": 10},
-            "long",
-        ),  # within 1: fewer steps, order
-        ({"paper": 9, "long": 10, "long_low_lr": 4, "single_camera_long": 2}, "paper"),  # fewer steps
-        ({"paper": 0, "long": 2, "long_low_lr": 2, "single_camera_long": 8}, "single_camera_long"),
+        ({"paper": 3, "long": 9, "single_camera_long": 10}, "long"),  # within 1: fewer steps, order
+        ({"paper": 9, "long": 10, "single_camera_long": 2}, "paper"),  # fewer steps
+        ({"paper": 0, "long": 2, "single_camera_long": 8}, "single_camera_long"),
+        ({"paper": 0, "long": 2, "long_frozen_head": 10, "single_camera_long": 8}, "long_frozen_head"),
     ],
 )
 def test_rule_takes_the_most_successes_then_the_shortest_fine_tuning(successes, selected):
-    assert nc.select({h: (s, 20) for h, s in successes.items()}) == selected
+    counts = {h: successes.get(h, 1) for h in nc.HYPOTHESES}  # the others: 1 of 20
+    assert nc.select({h: (s, 20) for h, s in counts.items()}) == selected
 
 
 def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
-    results = {"zero_shot_mini": (1, 20), "paper": (3, 20), "long": (7, 20)}
+    results = {"zero_shot_mini": (1, 20), "paper": (3, 20), "long": (7, 20), "long_frozen_head": (2, 20)}
     summary = {
         "task": TASK0,
         "validation_seed": nc.VALIDATION_SEED,
         "validation_episodes": nc.VALIDATION_EPISODES,
-        "hypotheses": {h: {"pretrained": p, "steps": s, "lr": lr} for h, (p, s, lr) in nc.HYPOTHESES.items()},
+        "hypotheses": {h: dataclasses.asdict(recipe) for h, recipe in nc.HYPOTHESES.items()},
         "results": {m: {"successes": s, "episodes": n, "commit": "abc"} for m, (s, n) in results.items()},
         "selected": None,
     }
@@ -103,11 +102,13 @@ def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
     report = (tmp_path / "out" / "report.md").read_text()
     assert "| zero_shot_mini | mini | none (zero-shot) | 1/20 (0.9-23.6 %) |  |" in report
     assert "| long | mini | 1000 steps, mini's lr | 7/20 (18.1-56.7 %) |  |" in report
+    assert "| long_frozen_head | mini | 1000 steps, mini's lr, head frozen | 2/20 (" in report
 
 
 def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
     runs = nc.protocol(tmp_path)
     counts = {"paper": 2, "long": 8, "long_low_lr": 5, "single_camera_long": 7}
+    counts |= {"long_frozen_head": 3, "long_frozen_backbone": 8}
     for run in runs:
         hypothesis = run.name.removeprefix("validation/")
         if run.kind != "eval" or hypothesis not in counts:
