@@ -24,6 +24,14 @@ the same for every task, so datasets of different tasks recorded with it merge i
 on which a policy that reads ``observation.environment_state`` (OmniD, LeRobot's DP and ACT) learns which
 task it is asked for; evaluate it with ``--env.task_onehot=true``.
 
+``--hidden-cameras`` adds the column ``observation.camera_visible`` (:mod:`lerobot_omnid.camera_visibility`):
+per recorded camera, 1.0 if the episodes are meant to show it, 0.0 if they hide it. Every camera is still
+recorded with its real images; OmniD leaves the hidden ones out of its fusion. The feature does not depend on
+which cameras are hidden, so a dataset of new-camera episodes (``--hidden-cameras cam_b,cam_c,cam_d,cam_e``)
+and one of replayed training-camera episodes (``--hidden-cameras cam_a``), both recorded with the five
+cameras, merge into one fine-tuning set. ``--hidden-cameras ''`` writes the column with every camera visible,
+for episodes that show them all in such a merge.
+
 Example::
 
     MUJOCO_GL=egl omnid-record --task select_apple --episodes 50 --root data/omnid_select_apple
@@ -81,6 +89,12 @@ from lerobot_omnid.calibration.frame_columns import (
     intrinsics_key,
 )
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY
+from lerobot_omnid.camera_visibility import (
+    CAMERA_VISIBLE_KEY,
+    camera_visible_column,
+    camera_visible_feature,
+    check_hidden_cameras,
+)
 from lerobot_omnid.cli import check_positive_int, positive_int
 from lerobot_omnid.env_config import OmniDEnvConfig, calibration_dict, validate_cameras, validate_image_size
 from lerobot_omnid.env_config_metaworld import OmniDMetaWorldEnvConfig
@@ -259,11 +273,13 @@ def dataset_features(
     image_size: int,
     per_frame_calibration: bool = True,
     task_onehot: bool = False,
+    camera_visible: bool = False,
 ) -> dict[str, dict]:
     """LeRobot feature spec of the recorded dataset: videos, named state and action, each camera's
-    calibration (static in the video feature's info, or per frame as columns) and, with ``task_onehot``, the
-    task one-hot ``observation.environment_state``, whose spec does not depend on the task (datasets of
-    different tasks merge)."""
+    calibration (static in the video feature's info, or per frame as columns), with ``task_onehot`` the
+    task one-hot ``observation.environment_state`` and with ``camera_visible`` the column
+    ``observation.camera_visible`` over ``cameras``. Neither spec depends on the task or on which cameras
+    are hidden (such datasets merge)."""
     unwrapped = env.unwrapped
     features: dict[str, dict] = {}
     for cam in cameras:
@@ -280,6 +296,8 @@ def dataset_features(
     if task_onehot:
         names = list(TASK_ONEHOT_NAMES)
         features[OBS_ENV_STATE] = {"dtype": "float32", "shape": (len(names),), "names": names}
+    if camera_visible:
+        features[CAMERA_VISIBLE_KEY] = camera_visible_feature(cameras)
     return features
 
 
@@ -299,12 +317,14 @@ def _run_expert_episode(
     cameras: Sequence[str],
     per_frame_calibration: bool,
     task_onehot: bool,
+    camera_visible: np.ndarray | None,
     seed: int,
     stop: _StopOnSigint,
     expert_factory: Callable[[gym.Env], Any],
 ) -> bool | None:
     """Roll out the expert once, adding every frame (with the calibration the env observed it with, when
-    ``per_frame_calibration``, and its task one-hot, when ``task_onehot``) to the dataset's episode buffer.
+    ``per_frame_calibration``, its task one-hot, when ``task_onehot``, and the ``camera_visible`` column
+    value, when given) to the dataset's episode buffer.
 
     Returns the episode's success, or None when a stop was requested before it ended.
     """
@@ -321,6 +341,8 @@ def _run_expert_episode(
                 frame[intrinsics_key(cam)] = obs[f"{INTRINSICS_OBS_PREFIX}{cam}"]
         if task_onehot:
             frame[OBS_ENV_STATE] = obs[ENV_STATE_OBS_KEY]
+        if camera_visible is not None:
+            frame[CAMERA_VISIBLE_KEY] = camera_visible
         dataset.add_frame(frame)
         obs, _, terminated, truncated, info = env.step(action)
         if stop.requested:
@@ -343,6 +365,7 @@ def record_dataset(
     rig: str = DEFAULT_RIG,
     per_frame_calibration: bool = True,
     task_onehot: bool = False,
+    hidden_cameras: Sequence[str] | None = None,
     seed: int = 0,
     max_attempts: int | None = None,
     episode_length: int | None = None,
@@ -365,6 +388,10 @@ def record_dataset(
         task_onehot: Write the task as a one-hot over ``TASKS`` in every frame, the column
             ``observation.environment_state`` (omnid suite only), so that datasets of several tasks merge
             into one on which a policy learns which task it is asked for.
+        hidden_cameras: Recorded cameras that the episodes are meant not to show (not all of them): every
+            camera is recorded with its real images, and the column ``observation.camera_visible`` (0.0 for
+            these, 1.0 for the others; :mod:`lerobot_omnid.camera_visibility`) tells OmniD to leave them out
+            of its fusion. Empty: the column with every camera visible; None (default): no column.
         episodes: Successful episodes to save.
         repo_id: Dataset id; default ``local/omnid_<task>`` (``local/omnid_metaworld_<task>``).
         seed: Attempt ``i`` resets the env with ``seed + i``.
@@ -394,6 +421,10 @@ def record_dataset(
         task_onehot,
     )
     check_wrist_calibration(cfg.cameras, per_frame_calibration, suite)
+    camera_visible = None
+    if hidden_cameras is not None:
+        hidden = check_hidden_cameras("hidden_cameras", hidden_cameras, cfg.cameras)
+        camera_visible = camera_visible_column(cfg.cameras, hidden)
     repo_id = repo_id or default_repo_id(suite, task)
     if push_to_hub and repo_id.startswith("local/"):
         raise ValueError(
@@ -410,7 +441,14 @@ def record_dataset(
     attempts = saved = 0
     interrupted = False
     try:
-        features = dataset_features(env, cfg.cameras, cfg.image_size, cfg.per_frame_calibration, task_onehot)
+        features = dataset_features(
+            env,
+            cfg.cameras,
+            cfg.image_size,
+            cfg.per_frame_calibration,
+            task_onehot,
+            camera_visible is not None,
+        )
         # Streaming: frames go to per-camera encoder threads (no PNG round trip). Their queues hold a
         # whole episode, so a frame is never dropped however slow the encoder is.
         dataset = LeRobotDataset.create(
@@ -436,6 +474,7 @@ def record_dataset(
                     cfg.cameras,
                     cfg.per_frame_calibration,
                     task_onehot,
+                    camera_visible,
                     seed + attempts - 1,
                     stop,
                     lambda env: make_expert(suite, env),
@@ -495,8 +534,14 @@ def _camera_list(text: str) -> list[str]:
     return cameras
 
 
+def _hidden_camera_list(text: str) -> list[str]:
+    """Comma-separated camera names, possibly none (checked against ``--cameras`` after parsing)."""
+    return [c.strip() for c in text.split(",") if c.strip()]
+
+
 def _check_suite_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Resolve the suite-dependent defaults of ``args`` (task, cameras) and check them against the suite."""
+    """Resolve the suite-dependent defaults of ``args`` (task, cameras) and check them against the suite
+    (and ``--hidden-cameras`` against ``--cameras``)."""
     suite = args.suite
     if args.task is None:
         if suite != "omnid":
@@ -512,6 +557,11 @@ def _check_suite_arguments(parser: argparse.ArgumentParser, args: argparse.Names
         validate_cameras("--cameras", args.cameras, SUITE_CAMERAS[suite])
     except ValueError as e:
         parser.error(f"{e} (comma-separated, e.g. {','.join(DEFAULT_CAMERAS[suite][:2])})")
+    if args.hidden_cameras is not None:
+        try:
+            check_hidden_cameras("--hidden-cameras", args.hidden_cameras, args.cameras)
+        except ValueError as e:
+            parser.error(f"{e} (--cameras {','.join(args.cameras)})")
     if suite == "metaworld":
         for flag, value, default in (
             ("--layout", args.layout, "id"),
@@ -615,6 +665,18 @@ def build_parser() -> argparse.ArgumentParser:
         "dataset whose policies are told the task (evaluate with --env.task_onehot=true); omnid suite only",
     )
     parser.add_argument(
+        "--hidden-cameras",
+        type=_hidden_camera_list,
+        default=None,
+        help="comma-separated cameras among --cameras that the episodes are meant not to show: every camera "
+        "is still recorded with its real rendered images (not black ones), and the column "
+        "observation.camera_visible (per recorded camera, 0.0 hidden, 1.0 visible) tells OmniD to leave the "
+        "hidden ones out of its fusion. Its feature is the same whichever cameras are hidden, so e.g. "
+        "new-camera episodes (--hidden-cameras cam_b,cam_c,cam_d,cam_e) and replayed training-camera "
+        "episodes (--hidden-cameras cam_a), both with --cameras cam_a,...,cam_e, merge with "
+        "lerobot-edit-dataset. '' writes the column with every camera visible (default: no column)",
+    )
+    parser.add_argument(
         "--seed", type=int, default=0, help="attempt i resets the env with seed + i (default: %(default)s)"
     )
     parser.add_argument(
@@ -689,6 +751,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         rig=args.rig,
         per_frame_calibration=args.per_frame_calibration,
         task_onehot=args.task_onehot,
+        hidden_cameras=args.hidden_cameras,
         seed=args.seed,
         max_attempts=args.max_attempts,
         push_to_hub=args.push_to_hub,

@@ -28,6 +28,7 @@ from lerobot_omnid.calibration.frame_columns import (
     is_calibration_key,
 )
 from lerobot_omnid.calibration.schema import CALIBRATION_INFO_KEY, calibration_from_feature_info
+from lerobot_omnid.camera_visibility import CAMERA_VISIBLE_KEY
 from lerobot_omnid.env_config import OmniDEnvConfig
 from lerobot_omnid.record import main, record_dataset
 
@@ -113,6 +114,7 @@ def test_dataset_loads_with_calibrated_videos_names_and_task(five_cam_root):
         # The default: the calibration is in every frame's columns, none in the feature info.
         assert CALIBRATION_INFO_KEY not in feature["info"]
         assert extrinsics_key(key) in meta.features and intrinsics_key(key) in meta.features
+    assert CAMERA_VISIBLE_KEY not in meta.features  # only with --hidden-cameras
 
     assert meta.features["observation.state"]["names"] == list(STATE_NAMES)
     assert meta.features["action"]["names"] == list(ACTION_NAMES)

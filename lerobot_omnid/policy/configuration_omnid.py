@@ -19,9 +19,10 @@ from lerobot_omnid.calibration.schema import (
     CameraCalibration,
     calibration_from_feature_info,
 )
+from lerobot_omnid.camera_visibility import CAMERA_VISIBLE_KEY
 from lerobot_omnid.cli import check_choice, check_positive_int
 from lerobot_omnid.geometry import AXES, PAPER_VOLUME_BOUNDS, FeatureVolume
-from lerobot_omnid.keys import image_key
+from lerobot_omnid.keys import camera_name, image_key
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 BACKBONES = ("resnet18", "resnet34", "resnet50", "resnet101")
@@ -78,6 +79,15 @@ class OmniDConfig(PreTrainedConfig):
             camera, or data merged from several rigs. Set from the dataset when both columns of a used
             camera exist (they then win over a static calibration in the feature info); the columns are
             kept out of ``input_features``, so they are neither normalised nor part of the state.
+        camera_visible_names: The recorded cameras' names of the dataset's column
+            ``observation.camera_visible`` (:mod:`lerobot_omnid.camera_visibility`, written by
+            ``omnid-record --hidden-cameras``), in its order: the feature's ``names``, set from the dataset
+            by ``set_dataset_feature_metadata`` and saved in ``config.json``; None when the dataset has no
+            such column. Whenever a batch has the column, in training and at inference, each sample fuses
+            only those of the policy's cameras (matched by name: the policy may use a subset, in another
+            order) that every one of its observation steps marks visible, AND-ed with ``camera_dropout`` in
+            training. The column is kept out of ``input_features``, so it is neither normalised nor part of
+            the state. An env never sends it: evaluation is unchanged. Needs the OFG (``use_ofg``).
         cameras: Which of the dataset's cameras the policy uses, by name ("cam_b") or feature key
             ("observation.images.cam_b"); None uses every image feature of the dataset.
         calibration_path: A calibration file (``lerobot_omnid.calibration.rig_file``) whose cameras override
@@ -198,6 +208,7 @@ class OmniDConfig(PreTrainedConfig):
     )
     camera_calibration: dict[str, dict] = field(default_factory=dict)
     frame_calibration: list[str] = field(default_factory=list)
+    camera_visible_names: list[str] | None = None
     cameras: list[str] | None = None
     calibration_path: str | None = None
 
@@ -411,7 +422,8 @@ class OmniDConfig(PreTrainedConfig):
         The calibration of every image feature of the dataset replaces what the config had (so
         fine-tuning a checkpoint on a dataset with new cameras uses the new calibrations), and the
         policy's image inputs become the dataset's image features: the OFG does not depend on the
-        number or identity of cameras.
+        number or identity of cameras. The names of an ``observation.camera_visible`` column are taken too
+        (``camera_visible_names``), and that column is kept out of the inputs, as the calibration columns.
         """
         image_keys = [
             k
@@ -441,6 +453,7 @@ class OmniDConfig(PreTrainedConfig):
                 f"`observation.images.<cam>`)"
             )
         self._check_no_override_of_frame_calibration()
+        self.camera_visible_names = _camera_visible_names(dataset_features, image_keys)
         # The "w/o OFG" ablation does not use calibration: keep whatever the dataset has.
         # A calibration file given with this config overrides the dataset's static calibration.
         self.camera_calibration = {
@@ -458,7 +471,7 @@ class OmniDConfig(PreTrainedConfig):
             others = {
                 k: ft
                 for k, ft in self.input_features.items()
-                if ft.type is not FeatureType.VISUAL and not is_calibration_key(k)
+                if ft.type is not FeatureType.VISUAL and not is_calibration_key(k) and k != CAMERA_VISIBLE_KEY
             }
             self.input_features = {**others, **dataset_images}
 
@@ -492,6 +505,12 @@ class OmniDConfig(PreTrainedConfig):
                 raise ValueError(f"{key}: expected an RGB image feature of shape (3, H, W), got {ft.shape}")
             if self.use_ofg and key not in self.frame_calibration:
                 self.calibration(key)
+        if not self.use_ofg and self.camera_visible_names is not None:
+            raise ValueError(
+                f"`camera_visible_names`: expected None with use_ofg=false, got {self.camera_visible_names} "
+                f"(the dataset's `{CAMERA_VISIBLE_KEY}` column): the 'w/o OFG' ablation concatenates every "
+                f"camera's features in a fixed order and cannot leave a hidden camera out"
+            )
         if not self.use_ofg:
             shapes = {ft.shape for ft in self.image_features.values()}
             if len(shapes) > 1:
@@ -519,3 +538,31 @@ class OmniDConfig(PreTrainedConfig):
     @property
     def reward_delta_indices(self) -> None:
         return None
+
+
+def _camera_visible_names(
+    dataset_features: dict[str, dict[str, Any]], image_keys: list[str]
+) -> list[str] | None:
+    """The recorded cameras' names of the dataset's ``observation.camera_visible`` column (None without one),
+    checked: one distinct name per value, and every camera the policy uses among them."""
+    feature = dataset_features.get(CAMERA_VISIBLE_KEY)
+    if feature is None:
+        return None
+    names, shape = feature.get("names"), tuple(feature.get("shape") or ())
+    if (
+        not isinstance(names, list | tuple)
+        or len(shape) != 1
+        or len(names) != shape[0]
+        or len(set(names)) != len(names)
+    ):
+        raise ValueError(
+            f"`{CAMERA_VISIBLE_KEY}`: expected a feature of shape (R,) whose names are the R distinct "
+            f"recorded cameras, got shape {shape} and names {names!r}"
+        )
+    missing = [camera_name(k) for k in image_keys if camera_name(k) not in names]
+    if missing:
+        raise ValueError(
+            f"`{CAMERA_VISIBLE_KEY}`: the policy's cameras {missing} are not among the column's cameras "
+            f"{list(names)}, so whether an episode shows them is unknown"
+        )
+    return list(names)

@@ -1,7 +1,8 @@
 """OmniD policy: shared ResNet -> Omni-Feature Generator -> LeRobot's conditional 1D UNet diffusion head.
 
 Shape legend: B batch, T observation steps, S cameras, H W image, Da action dim, Ds state dim, De env state
-dim (``observation.environment_state``, e.g. a task one-hot; absent unless the inputs have it).
+dim (``observation.environment_state``, e.g. a task one-hot; absent unless the inputs have it), R recorded
+cameras of an ``observation.camera_visible`` column.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from lerobot_omnid.calibration.schema import (
     CameraCalibration,
     camera_matrices,
 )
+from lerobot_omnid.camera_visibility import CAMERA_VISIBLE_KEY, visible_cameras
 from lerobot_omnid.geometry import (
     axis_angle_to_matrix,
     crop_intrinsics,
@@ -51,14 +53,32 @@ FRAME_MATRICES = ("omnid.pix_T_cam", "omnid.cam_T_world")
 """Keys of every frame's camera matrices among the stacked (and queued) inputs: (B, [T,] S, 3, 3) and 4x4,
 for the backbone's input size, static and per-frame calibration alike."""
 
+VISIBLE_CAMERAS = "omnid.visible_cameras"
+"""Key of every frame's mask of the policy's cameras it shows among the stacked (and queued) inputs:
+(B, [T,] S) bool, from ``observation.camera_visible``; absent when the batch has no such column."""
+
 
 def camera_dropout_mask(
-    batch_size: int, num_cameras: int, p: float, device: torch.device, single_rate: float = 0.0
+    batch_size: int,
+    num_cameras: int,
+    p: float,
+    device: torch.device,
+    single_rate: float = 0.0,
+    available: Tensor | None = None,
 ) -> Tensor:
     """(B, S) bool: each camera kept with probability 1 - p, and at least one (a random one) per sample;
-    a share ``single_rate`` of the samples then keeps exactly that one camera."""
+    a share ``single_rate`` of the samples then keeps exactly that one camera.
+
+    ``available`` (B, S) bool, at least one per sample (the cameras each sample shows,
+    ``observation.camera_visible``): only those are kept, and the one kept for sure is drawn among them.
+    """
     keep = torch.rand(batch_size, num_cameras, device=device) >= p
-    one = F.one_hot(torch.randint(num_cameras, (batch_size,), device=device), num_cameras).bool()
+    if available is None:
+        pick = torch.randint(num_cameras, (batch_size,), device=device)
+    else:
+        keep = keep & available
+        pick = torch.rand(batch_size, num_cameras, device=device).masked_fill(~available, -1.0).argmax(dim=-1)
+    one = F.one_hot(pick, num_cameras).bool()
     single = torch.rand(batch_size, 1, device=device) < single_rate
     return torch.where(single, one, keep | one)
 
@@ -88,6 +108,23 @@ def _frame_name(batch: Mapping[str, Tensor], index: tuple[int, ...], lead: torch
         frame = int(batch["frame_index"].reshape(lead[0], -1)[index[0], -1]) - steps_back
         parts.append(f"frame {max(frame, 0)}")
     return ", ".join(parts)
+
+
+def _sample_visibility(visible: Tensor) -> Tensor:
+    """(B, T, S) cameras each observation step shows -> (B, S) cameras each sample fuses: those that every
+    step shows. One set per sample, as camera dropout draws it: every step's plane is lifted from the same
+    cameras. Steps of one sample disagree only where the column changes within an episode (a window never
+    spans two episodes); a camera hidden at any of them is then left out, since hidden means the camera is
+    not to be seen."""
+    per_sample = visible.all(dim=1)
+    blind = (~per_sample.any(dim=-1)).nonzero()[:, 0].tolist()
+    if blind:
+        raise ValueError(
+            f"`{CAMERA_VISIBLE_KEY}`: batch samples {blind} show none of the policy's cameras at every "
+            f"observation step (each step shows some, but not the same); a sample fuses only the cameras "
+            f"that all its steps show, and must keep at least one"
+        )
+    return per_sample
 
 
 class OmniDPolicy(PreTrainedPolicy):
@@ -138,7 +175,7 @@ class OmniDPolicy(PreTrainedPolicy):
         observed = (
             OBS_STATE,
             OBS_IMAGES,
-            *(FRAME_MATRICES if self.config.use_ofg else ()),
+            *((*FRAME_MATRICES, VISIBLE_CAMERAS) if self.config.use_ofg else ()),
             *((OBS_ENV_STATE,) if self.config.env_state_feature else ()),
         )
         self._queues = {key: deque(maxlen=self.config.n_obs_steps) for key in observed}
@@ -204,8 +241,9 @@ class OmniDPolicy(PreTrainedPolicy):
         )
 
     def _stack_inputs(self, batch: dict[str, Tensor], time_dim: bool) -> dict[str, Tensor]:
-        """Validate the inputs and stack the cameras: images (B, [T,] S, 3, H, W), state (B, [T,] Ds) and,
-        when the policy has one, the env state (B, [T,] De)."""
+        """Validate the inputs and stack the cameras: images (B, [T,] S, 3, H, W), state (B, [T,] Ds), when
+        the policy has one the env state (B, [T,] De) and, when the batch has ``observation.camera_visible``,
+        the cameras each frame shows (B, [T,] S)."""
         image_ndim = 5 if time_dim else 4
         if OBS_STATE not in batch:
             raise KeyError(f"`{OBS_STATE}` is missing from the batch (keys: {sorted(batch)})")
@@ -240,6 +278,8 @@ class OmniDPolicy(PreTrainedPolicy):
         stacked = {OBS_STATE: state, OBS_IMAGES: torch.stack(images, dim=-4)}
         if self.config.env_state_feature:
             stacked[OBS_ENV_STATE] = self._env_state(batch, state.shape[:-1])
+        if CAMERA_VISIBLE_KEY in batch:
+            stacked[VISIBLE_CAMERAS] = self._visible_cameras(batch, state.shape[:-1])
         if self.config.use_ofg:
             stacked.update(zip(FRAME_MATRICES, self.frame_matrices(batch, sizes), strict=True))
         return stacked
@@ -258,6 +298,34 @@ class OmniDPolicy(PreTrainedPolicy):
         if not torch.isfinite(env_state).all():
             raise ValueError(f"`{OBS_ENV_STATE}` contains NaN or infinite values")
         return env_state
+
+    def _visible_cameras(self, batch: dict[str, Tensor], lead: torch.Size) -> Tensor:
+        """(*lead, S) bool: which of the policy's cameras each frame shows, from the batch's
+        ``observation.camera_visible`` (*lead, R) over the recorded cameras ``config.camera_visible_names``;
+        every frame must show at least one."""
+        names = self.config.camera_visible_names
+        if names is None:
+            raise ValueError(
+                f"`{CAMERA_VISIBLE_KEY}` is in the batch, but the policy does not know which recorded "
+                f"cameras its values are for: `camera_visible_names` is None (the policy was not made from a "
+                f"dataset with that column); set it to the column feature's names"
+            )
+        column = batch[CAMERA_VISIBLE_KEY]
+        if tuple(column.shape) != (*lead, len(names)):
+            raise ValueError(
+                f"`{CAMERA_VISIBLE_KEY}`: expected shape {(*lead, len(names))} (one value per recorded "
+                f"camera {names}), got {tuple(column.shape)}"
+            )
+        visible = visible_cameras(column, names, self.camera_keys)
+        blind = ~visible.any(dim=-1)
+        if blind.any():
+            index = tuple(int(i) for i in blind.nonzero()[0])
+            raise ValueError(
+                f"`{CAMERA_VISIBLE_KEY}`: {_frame_name(batch, index, lead)} shows none of the policy's "
+                f"cameras {self.camera_keys} (its column over {names}: {column[index].tolist()}); a sample "
+                f"must keep at least one camera"
+            )
+        return visible
 
     def frame_matrices(
         self, batch: dict[str, Tensor], sizes: tuple[tuple[int, int], ...]
@@ -338,19 +406,22 @@ class OmniDPolicy(PreTrainedPolicy):
         if not self.config.use_ofg:
             return self.model.global_condition(images, stacked[OBS_STATE], None, None, env_state=env_state)
         pix_T_cam, cam_T_world = (stacked[k] for k in FRAME_MATRICES)  # B, T, S, ...
-        camera_mask = None
+        camera_mask = _sample_visibility(stacked[VISIBLE_CAMERAS]) if VISIBLE_CAMERAS in stacked else None
         if augment:
-            images, pix_T_cam, cam_T_world, camera_mask = self._augment(images, pix_T_cam, cam_T_world)
+            images, pix_T_cam, cam_T_world, camera_mask = self._augment(
+                images, pix_T_cam, cam_T_world, camera_mask
+            )
         return self.model.global_condition(
             images, stacked[OBS_STATE], pix_T_cam, cam_T_world, camera_mask, env_state=env_state
         )
 
     def _augment(
-        self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor
+        self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor, visible: Tensor | None = None
     ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
         """The training-time options that keep images and calibration consistent: crop, calibration noise,
-        camera dropout. Geometry in full precision (autocast off): see the OFG."""
-        camera_mask = None
+        camera dropout (among the ``visible`` (B, S) cameras of each sample, when given; the returned mask is
+        ``visible`` itself without dropout). Geometry in full precision (autocast off): see the OFG."""
+        camera_mask = visible
         with torch.autocast(images.device.type, enabled=False):
             if self.config.random_crop_min_scale < 1:
                 images, pix_T_cam = self._random_crop(images, pix_T_cam)
@@ -358,7 +429,7 @@ class OmniDPolicy(PreTrainedPolicy):
         if self.config.camera_dropout > 0 or self.config.single_camera_rate > 0:
             B, S = images.shape[0], images.shape[2]  # images: B, T, S, 3, H, W
             camera_mask = camera_dropout_mask(
-                B, S, self.config.camera_dropout, images.device, self.config.single_camera_rate
+                B, S, self.config.camera_dropout, images.device, self.config.single_camera_rate, visible
             )
         return images, pix_T_cam, cam_T_world, camera_mask
 
@@ -408,7 +479,8 @@ class OmniDPolicy(PreTrainedPolicy):
         """Predict ``n_action_steps`` actions (B, n_action_steps, Da) from the queued observations, or from
         a batch with a time dimension when the queues are empty (offline use)."""
         if len(self._queues[OBS_STATE]) > 0:
-            stacked = {k: torch.stack(list(q), dim=1) for k, q in self._queues.items() if k != ACTION}
+            # A queue stays empty for an input the observations lack (the env sends no camera_visible).
+            stacked = {k: torch.stack(list(q), dim=1) for k, q in self._queues.items() if k != ACTION and q}
         else:
             stacked = self._stack_inputs(batch, time_dim=True)
         return self.model.generate_actions(self._condition(stacked), noise=noise)
