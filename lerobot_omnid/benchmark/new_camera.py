@@ -11,7 +11,8 @@ The protocol (docs/benchmark.md#a-new-camera-its-protocol), fixed before any of 
 3. *Hypotheses* (``HYPOTHESES``): a pre-trained model fine-tuned on the camera-A episodes for some steps at
    some learning rate, some parts frozen: the paper's recipe at CPU size (``mini``, 200 steps, the
    benchmark's), longer fine-tuning (1000 steps), longer at a lower learning rate (1e-4), longer from
-   ``single_camera``, longer with the diffusion head frozen, longer with the backbone frozen.
+   ``single_camera``, longer with the diffusion head frozen, longer with the backbone frozen, longer with
+   as many B-E training episodes replayed beside the camera-A ones (``REPLAY_DATA``).
    Zero-shot (no fine-tuning) each pre-trained model is evaluated on camera A too.
 4. *Validation*, never reported as a result: ``lerobot-eval`` with camera A only, ID, env seeds
    ``VALIDATION_SEED`` ... (``VALIDATION_EPISODES``), disjoint from every other seed set; the policy reads
@@ -67,12 +68,14 @@ PRETRAINED = {  # name: options added to mini's OmniD
 @dataclass(frozen=True)
 class Hypothesis:
     """A fine-tuning recipe: from which pre-trained model, how many steps, at which learning rate (None:
-    mini's) and with which parts frozen (``--policy.frozen_modules``)."""
+    mini's), with which parts frozen (``--policy.frozen_modules``) and whether training episodes of cameras
+    B-E are replayed beside the camera-A ones."""
 
     pretrained: str
     steps: int
     lr: float | None = None
     frozen: tuple[str, ...] = ()
+    replay: bool = False  # the camera-A episodes mixed with as many replayed B-E episodes (REPLAY_DATA)
 
 
 HYPOTHESES = {
@@ -84,12 +87,19 @@ HYPOTHESES = {
     "long_frozen_head": Hypothesis("mini", 1000, frozen=("head",)),
     # The ResNet's features are generic: adapt the OFG and the head only.
     "long_frozen_backbone": Hypothesis("mini", 1000, frozen=("backbone",)),
+    # Fine-tuning on camera A alone may make the plane forget B-E: keep showing them.
+    "long_replay": Hypothesis("mini", 1000, replay=True),
 }
 VALIDATION_SEED = 70_000
 VALIDATION_EPISODES = 20
 TIE_MARGIN = 1
 SELECTION_FILE = "selection.json"
 TRAIN_DATA, FEWSHOT_DATA = f"{TASK0}_bcde", f"{TASK0}_a_fewshot"  # the benchmark's folder names
+ALL_CAMERAS = (*CAMERA_A, *TRAIN_CAMERAS)
+REPLAY_DATA = f"{TASK0}_a_fewshot_replay"
+"""The replay hypotheses' fine-tuning set: the few-shot episodes and as many training episodes (env seeds
+from 0, replayed), both recorded with cameras A-E, merged; a per-frame column (``omnid-record
+--hidden-cameras``) shows OmniD camera A alone in the first and B-E in the second."""
 
 
 def pretrained_dir(out: Path, name: str) -> Path:
@@ -114,10 +124,26 @@ def records(out: Path) -> list[Run]:
     cmd_fewshot = commands.record_command(
         TASK0, p.fewshot_episodes, CAMERA_A, p.image_size, fewshot, seed=FEWSHOT_SEED
     )
-    return [
+    runs = [
         Run(f"record/{TRAIN_DATA}", "record", tuple(cmd_train), train, episodes=p.episodes),
         Run(f"record/{FEWSHOT_DATA}", "record", tuple(cmd_fewshot), fewshot, episodes=p.fewshot_episodes),
     ]
+    if any(recipe.replay for recipe in HYPOTHESES.values()):
+        parts = []
+        for name, seed, hidden in (("a", FEWSHOT_SEED, TRAIN_CAMERAS), ("bcde", 0, CAMERA_A)):
+            root = out / "data" / f"{REPLAY_DATA}_{name}"
+            cmd = commands.record_command(
+                TASK0, p.fewshot_episodes, ALL_CAMERAS, p.image_size, root, seed=seed
+            )
+            cmd += ["--hidden-cameras", ",".join(hidden)]
+            runs.append(Run(f"record/{root.name}", "record", tuple(cmd), root, episodes=p.fewshot_episodes))
+            parts.append(root)
+        merged = out / "data" / REPLAY_DATA
+        needs = tuple(f"record/{part.name}" for part in parts)
+        runs.append(
+            Run(f"merge/{REPLAY_DATA}", "merge", tuple(commands.merge_command(parts, merged)), merged, needs)
+        )
+    return runs
 
 
 def pretrain(out: Path, name: str) -> list[str]:
@@ -136,13 +162,17 @@ def pretrain(out: Path, name: str) -> list[str]:
 def finetune(out: Path, hypothesis: str) -> list[str]:
     recipe = HYPOTHESES[hypothesis]
     flags = [f"--policy.path={pretrained_dir(out, recipe.pretrained) / CHECKPOINT}", "--policy.device=cpu"]
-    flags += ["--policy.push_to_hub=false", *(flag for flag, _ in finetune_flags("omnid", MINI))]
+    flags.append("--policy.push_to_hub=false")
+    if recipe.replay:
+        flags.append("--policy.cameras=" + commands.json_list(ALL_CAMERAS))
+    else:
+        flags += [flag for flag, _ in finetune_flags("omnid", MINI)]
     if recipe.lr is not None:
         flags.append(f"--policy.optimizer_lr={recipe.lr:g}")
     if recipe.frozen:
         flags.append(f"--policy.frozen_modules=[{','.join(recipe.frozen)}]")
     return commands.train_command(
-        out / "data" / FEWSHOT_DATA,
+        out / "data" / (REPLAY_DATA if recipe.replay else FEWSHOT_DATA),
         finetuned_dir(out, hypothesis),
         flags,
         recipe.steps,
@@ -190,7 +220,8 @@ def protocol(out: Path) -> list[Run]:
         )
     for hypothesis, recipe in HYPOTHESES.items():
         name = str(finetuned_dir(out, hypothesis).relative_to(out))
-        needs = (str(pretrained_dir(out, recipe.pretrained).relative_to(out)), runs[1].name)
+        data = f"merge/{REPLAY_DATA}" if recipe.replay else runs[1].name
+        needs = (str(pretrained_dir(out, recipe.pretrained).relative_to(out)), data)
         runs.append(
             Run(name, "train", tuple(finetune(out, hypothesis)), finetuned_dir(out, hypothesis), needs)
         )

@@ -54,6 +54,31 @@ def test_hypotheses_differ_only_where_they_say(tmp_path):
     assert "--policy.optimizer_lr" not in long
     single_long = runs["finetune_validation/single_camera_long"]
     assert single_long["--policy.path"].startswith(str(tmp_path / "train_single_camera"))
+    frozen = runs["finetune_validation/long_frozen_head"]
+    assert set(frozen.items()) - set(long.items()) == {
+        ("--policy.frozen_modules", "[head]"),
+        ("--output_dir", str(tmp_path / "finetune_validation" / "long_frozen_head")),
+    }
+
+
+def test_replay_mixes_the_camera_a_episodes_with_as_many_training_episodes(tmp_path):
+    """Both halves recorded with cameras A-E, camera A shown alone in the few-shot episodes and hidden in
+    the replayed training episodes (the same env seeds as the training set's first), then merged; the
+    fine-tuning fuses all five cameras, each sample only its visible ones."""
+    runs = {r.name: r for r in nc.protocol(tmp_path)}
+    fewshot, replayed = (runs[f"record/{nc.REPLAY_DATA}_{part}"] for part in ("a", "bcde"))
+    for run, seed, hidden in ((fewshot, FEWSHOT_SEED, "cam_b,cam_c,cam_d,cam_e"), (replayed, 0, "cam_a")):
+        cmd = list(run.cmd)
+        assert cmd[cmd.index("--cameras") + 1] == "cam_a,cam_b,cam_c,cam_d,cam_e"
+        assert cmd[cmd.index("--seed") + 1] == str(seed) and cmd[cmd.index("--hidden-cameras") + 1] == hidden
+        assert cmd[cmd.index("--episodes") + 1] == "10"
+    merge = runs[f"merge/{nc.REPLAY_DATA}"]
+    assert merge.needs == (fewshot.name, replayed.name)
+    tuned = runs["finetune_validation/long_replay"]
+    assert merge.name in tuned.needs
+    opts = options(tuned.cmd)
+    assert opts["--dataset.root"] == str(merge.output) and opts["--steps"] == "1000"
+    assert json.loads(opts["--policy.cameras"]) == ["cam_a", "cam_b", "cam_c", "cam_d", "cam_e"]
 
 
 def test_validation_sees_camera_a_alone_on_seeds_of_its_own(tmp_path):
@@ -108,7 +133,7 @@ def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
 def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
     runs = nc.protocol(tmp_path)
     counts = {"paper": 2, "long": 8, "long_low_lr": 5, "single_camera_long": 7}
-    counts |= {"long_frozen_head": 3, "long_frozen_backbone": 8}
+    counts |= {"long_frozen_head": 3, "long_frozen_backbone": 8, "long_replay": 1}
     for run in runs:
         hypothesis = run.name.removeprefix("validation/")
         if run.kind != "eval" or hypothesis not in counts:
