@@ -1,17 +1,19 @@
-"""The benchmark's results as success counts: one :class:`EvalRecord` per finished ``lerobot-eval`` run, read
-from its ``eval_info.json`` or from a benchmark folder's ``summary.json``, merged across folders (runs made
-on other machines) and pooled per table cell.
+"""Results as success counts: one :class:`EvalRecord` per finished ``lerobot-eval`` run, read from its
+``eval_info.json`` or from a run summary, merged across folders (runs made on other machines) and pooled per
+table cell; and the one format of every protocol's run summary (:class:`RunSummary`).
 
 A finished evaluation's counts come from its ``eval_info.json``, its commit and command from the engine's
-stamp of the run; a benchmark folder's ``summary.json`` holds every evaluation of that folder, so that
-copying it (under ``docs/results/``) is enough to combine results from several machines.
+stamp of the run. Every protocol writes its folder's ``summary.json`` in one format: the protocol, its
+settings, every evaluation as a record, what is not a success count (open-loop and probe errors, seconds,
+a selection) under ``results``, and the commit and command that wrote it; copying it (under
+``docs/results/``) is enough to rebuild the protocol's report or to combine results of several machines.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +24,9 @@ Key = tuple[str, str, str]
 the cell holds; setting: "id", "position_ood", "position_band_k", "ood1".."ood4" or "fewshot_a"."""
 
 SUMMARY = "summary.json"
-"""A benchmark folder's evaluations, profile, commit and command (:func:`write_summary`)."""
-SUMMARY_FORMAT = 1
+"""A protocol folder's run summary (:func:`write_run_summary`)."""
+SUMMARY_FORMAT = 2
+BENCHMARK = "omnid-benchmark"
 COMPARABLE = ("episodes", "image_size", "steps", "batch_size", "episode_length", "finetune_steps", "small")
 """Profile fields that must agree between folders whose results are combined: the models are the same
 experiment; methods, tasks, settings, training and eval seeds and episodes per evaluation may differ."""
@@ -47,7 +50,9 @@ class EvalEntry:
 class EvalRecord:
     """A finished evaluation: ``successes`` of ``episodes`` for one cell, control, training and eval seed.
     ``source``: the ``eval_info.json`` or summary file it was read from; ``commit``: the code commit that
-    ran it (None if not recorded)."""
+    ran it (None if not recorded); ``tags``: what else tells this cell from others of the protocol, sorted
+    (name, value) pairs (a rig, a training budget, a perturbation level).
+    """
 
     key: Key
     control: str
@@ -58,11 +63,15 @@ class EvalRecord:
     source: str
     commit: str | None = None
     command: tuple[str, ...] = ()
+    tags: tuple[tuple[str, str], ...] = ()
 
     @property
     def identity(self) -> tuple:
         """What makes two records the same evaluation (the same episodes of the same model)."""
-        return (self.key, self.control, self.train_seed, self.eval_seed)
+        return (self.key, self.control, self.train_seed, self.eval_seed, self.tags)
+
+    def tag(self, name: str) -> str | None:
+        return dict(self.tags).get(name)
 
     def to_json(self) -> dict[str, Any]:
         model, task, setting = self.key
@@ -77,6 +86,7 @@ class EvalRecord:
             "episodes": self.episodes,
             "commit": self.commit,
             "command": list(self.command),
+            "tags": dict(self.tags),
         }
 
     @classmethod
@@ -93,6 +103,7 @@ class EvalRecord:
                 source,
                 data.get("commit"),
                 tuple(data.get("command", ())),
+                tags_of(data.get("tags", {})),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"{source}: expected an evaluation record with {e}, got {dict(data)}") from e
@@ -102,6 +113,11 @@ class EvalRecord:
                 f"got {record.successes}/{record.episodes}"
             )
         return record
+
+
+def tags_of(tags: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
+    """A record's tags from a mapping: sorted, values as strings."""
+    return tuple(sorted((str(k), str(v)) for k, v in tags.items()))
 
 
 @dataclass(frozen=True)
@@ -166,6 +182,61 @@ def train_seeds(records: Iterable[EvalRecord]) -> list[int]:
     return sorted({r.train_seed for r in records if r.train_seed is not None})
 
 
+@dataclass(frozen=True)
+class RunSummary:
+    """What a protocol's folder holds, in the one format every protocol writes: the ``protocol`` (its
+    command or module), its ``settings``, every finished ``evaluations``, the ``results`` that are not
+    success counts, and the ``commit`` and ``command`` that wrote it."""
+
+    protocol: str
+    settings: Mapping[str, Any]
+    evaluations: Sequence[EvalRecord] = ()
+    results: Mapping[str, Any] = field(default_factory=dict)
+    commit: str | None = None
+    command: Sequence[str] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": SUMMARY_FORMAT,
+            "protocol": self.protocol,
+            "settings": dict(self.settings),
+            "commit": self.commit,
+            "command": list(self.command),
+            "evaluations": [r.to_json() for r in self.evaluations],
+            "results": dict(self.results),
+        }
+
+
+def write_run_summary(path: Path, summary: RunSummary) -> Path:
+    Path(path).write_text(json.dumps(summary.to_json(), indent=2) + "\n")
+    return Path(path)
+
+
+def read_run_summary(path: Path, protocol: str) -> RunSummary:
+    """The run summary in ``path`` (a file, or a folder's ``summary.json``) written by ``protocol``; errors
+    name the file, the field, what was expected and what was found."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / SUMMARY
+    if not path.is_file():
+        raise ValueError(
+            f"{path}: expected a run summary of {protocol} (its folder's {SUMMARY}), got no such file"
+        )
+    data = json.loads(path.read_text())
+    if data.get("format") != SUMMARY_FORMAT:
+        raise ValueError(f"{path}: format: expected {SUMMARY_FORMAT}, got {data.get('format')!r}")
+    if data.get("protocol") != protocol:
+        raise ValueError(f"{path}: protocol: expected {protocol!r}, got {data.get('protocol')!r}")
+    return RunSummary(
+        protocol,
+        data["settings"],
+        [EvalRecord.from_json(e, str(path)) for e in data["evaluations"]],
+        data["results"],
+        data.get("commit"),
+        data.get("command", []),
+    )
+
+
 def write_summary(
     path: Path,
     profile: Mapping[str, Any],
@@ -176,41 +247,23 @@ def write_summary(
 ) -> Path:
     """Write a benchmark folder's ``summary.json``: its profile and tasks, the code commit and command that
     wrote it, and every evaluation record of the folder (only its own, never ones merged from elsewhere)."""
-    data = {
-        "format": SUMMARY_FORMAT,
-        "profile": dict(profile),
-        "tasks": list(tasks),
-        "commit": commit,
-        "command": list(command),
-        "evaluations": [r.to_json() for r in records],
-    }
-    path.write_text(json.dumps(data, indent=2) + "\n")
-    return path
+    settings = {"profile": dict(profile), "tasks": list(tasks)}
+    return write_run_summary(path, RunSummary(BENCHMARK, settings, records, {}, commit, command))
 
 
 def read_summary(path: Path) -> tuple[dict[str, Any], list[EvalRecord]]:
-    """(profile, records) of a summary file, or of a benchmark folder's ``summary.json``."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / SUMMARY
-    if not path.is_file():
-        raise ValueError(
-            f"{path}: expected a benchmark summary (a folder's {SUMMARY}, written by every omnid-benchmark "
-            "run, e.g. `omnid-benchmark --report-only --out <folder>`), got no such file"
-        )
-    data = json.loads(path.read_text())
-    if data.get("format") != SUMMARY_FORMAT:
-        raise ValueError(f"{path}: format: expected {SUMMARY_FORMAT}, got {data.get('format')!r}")
-    return data["profile"], [EvalRecord.from_json(e, str(path)) for e in data["evaluations"]]
+    """(profile, records) of a benchmark summary file, or of a benchmark folder's ``summary.json``."""
+    summary = read_run_summary(path, BENCHMARK)
+    return dict(summary.settings["profile"]), list(summary.evaluations)
 
 
 def check_comparable(profile: Mapping[str, Any], other: Mapping[str, Any], source: str) -> None:
     """Raise ValueError naming the field if ``other`` (from ``source``) is not the same experiment."""
-    for field in COMPARABLE:
-        if profile.get(field) != other.get(field):
+    for name in COMPARABLE:
+        if profile.get(name) != other.get(name):
             raise ValueError(
-                f"{source}: {field}: expected {profile.get(field)!r} as in this benchmark's profile, got "
-                f"{other.get(field)!r} (results of different experiments are not combined)"
+                f"{source}: {name}: expected {profile.get(name)!r} as in this benchmark's profile, got "
+                f"{other.get(name)!r} (results of different experiments are not combined)"
             )
 
 

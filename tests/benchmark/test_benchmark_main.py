@@ -320,7 +320,7 @@ def test_report_only_aggregates_folders_from_two_machines(monkeypatch, tmp_path,
         bench.main(["--report-only", "--out", str(a), *small, "--also", str(conflict)])
     for bad, expected in (
         (["--steps", "5"], "steps: expected 5 as in this"),
-        ([], "expected a benchmark summary"),
+        ([], "expected a run summary of omnid-benchmark"),
     ):
         also = str(copied) if bad else str(tmp_path / "nowhere")
         with pytest.raises(SystemExit):

@@ -1,0 +1,52 @@
+"""The one run-summary format of every protocol: written and read back whole (tags included), and a file of
+another format or another protocol refused with the field, what was expected and what was found."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from lerobot_omnid.measure.results import (
+    SUMMARY_FORMAT,
+    EvalRecord,
+    RunSummary,
+    read_run_summary,
+    tags_of,
+    write_run_summary,
+)
+
+
+def test_a_summary_reads_back_as_written(tmp_path):
+    record = EvalRecord(
+        ("omnid", "select_apple", "id"),
+        "blind",
+        1000,
+        2,
+        3,
+        15,
+        "x",
+        "abc",
+        ("lerobot-eval",),
+        tags_of({"rig": "higher", "steps": 3000}),
+    )
+    summary = RunSummary("a_protocol", {"episodes": 15}, [record], {"selected": "keypoints"}, "abc", ["cmd"])
+    write_run_summary(tmp_path / "summary.json", summary)
+    back = read_run_summary(tmp_path, "a_protocol")  # a folder reads its summary.json
+    assert back.settings == {"episodes": 15} and back.results == {"selected": "keypoints"}
+    assert back.commit == "abc" and list(back.command) == ["cmd"]
+    (read,) = back.evaluations
+    assert read.identity == record.identity and read.tag("steps") == "3000" and read.tag("other") is None
+    assert (read.successes, read.episodes, read.command) == (3, 15, ("lerobot-eval",))
+
+
+def test_other_formats_and_protocols_are_refused(tmp_path):
+    path = write_run_summary(tmp_path / "s.json", RunSummary("a_protocol", {}))
+    with pytest.raises(ValueError, match=r"s.json: protocol: expected 'other', got 'a_protocol'"):
+        read_run_summary(path, "other")
+    data = json.loads(path.read_text()) | {"format": 1}
+    path.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=rf"s.json: format: expected {SUMMARY_FORMAT}, got 1"):
+        read_run_summary(path, "a_protocol")
+    with pytest.raises(ValueError, match="expected a run summary of a_protocol"):
+        read_run_summary(tmp_path / "missing.json", "a_protocol")
