@@ -16,8 +16,8 @@ hand. A stage made by the same command from the same inputs is not redone; one m
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,11 +46,19 @@ from lerobot_omnid.measure.engine import (
     read_stamp,
 )
 from lerobot_omnid.measure.report import short_commit
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    read_run_summary,
+    write_run_summary,
+)
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference, wilson_interval
 
 EVAL_BATCH_SIZE = 5  # envs each lerobot-eval runs at once: faster than one, the same env seeds
 BLIND = "id_blind"  # the ID evaluation under the blind control
+PROTOCOL = "omnid-demo"
+TASK = "select_apple"
 SUMMARY = "summary.json"  # the run's counts, commits, commands and timings; the report is rebuilt from it
 
 
@@ -149,59 +157,62 @@ def blind_margin(id_counts: tuple[int, int], blind_counts: tuple[int, int]) -> s
     )
 
 
-def summarise(runs: list[Run], out: Path, profile_name: str) -> dict:
+def summarise(runs: list[Run], out: Path, profile_name: str, commit: str | None = None) -> RunSummary:
     """The run's summary: per evaluation its counts and the commit that made it, per stage its command
     (paths relative to ``out``, so the file says nothing about the machine) and seconds, from the stamps."""
     stamps = {run.name: read_stamp(run) or {} for run in runs}
-    counts = {run.name: read_eval_info(run.output / "eval_info.json") for run in runs if run.kind == "eval"}
-    return {
-        "profile": profile_name,
-        "evaluations": [
-            {
-                "name": run.name.removeprefix("eval_"),
-                "successes": counts[run.name][0],
-                "episodes": counts[run.name][1],
-                "commit": stamps[run.name].get("commit"),
-            }
-            for run in runs
-            if run.kind == "eval"
-        ],
-        "stages": [
-            {
-                "name": run.name,
-                "seconds": stamps[run.name].get("seconds"),
-                "command": shlex.join(run.cmd).replace(f"{out}/", "").replace(str(commands.BIN) + "/", ""),
-            }
-            for run in runs
-        ],
-    }
+
+    def relative(cmd: Sequence[str]) -> str:
+        return shlex.join(cmd).replace(f"{out}/", "").replace(str(commands.BIN) + "/", "")
+
+    evaluations = []
+    for run in runs:
+        if run.kind != "eval":
+            continue
+        name = run.name.removeprefix("eval_")
+        setting, control = ("id", "blind") if name == BLIND else (name, "")
+        successes, episodes = read_eval_info(run.output / "eval_info.json")
+        source = f"{run.output.relative_to(out)}/eval_info.json"
+        commit_of_run = stamps[run.name].get("commit")
+        key = ("omnid", TASK, setting)
+        evaluations.append(EvalRecord(key, control, None, None, successes, episodes, source, commit_of_run))
+    stages = [
+        {"name": run.name, "seconds": stamps[run.name].get("seconds"), "command": relative(run.cmd)}
+        for run in runs
+    ]
+    return RunSummary(PROTOCOL, {"profile": profile_name}, evaluations, {"stages": stages}, commit)
 
 
-def write_report(summary: dict, path: Path) -> str:
+def evaluation_name(record: EvalRecord) -> str:
+    """``id``, ``position_ood`` or ``id_blind``: the evaluation's folder is ``eval_<name>``."""
+    return BLIND if record.control == "blind" else record.key[2]
+
+
+def write_report(summary: RunSummary, path: Path) -> str:
     """Write the report from a run's summary (this run's or a committed one); returns its sentence on the
     margin over the blind control."""
     lines = [
         "# OmniD main job: select_apple, cameras B-E",
         "",
-        f"Profile `{summary['profile']}`; paths are relative to the output folder. The `{BLIND}` row is the "
-        "blind control: the same checkpoint and env seeds as `id`, every camera turned away from the volume "
-        "in its calibration (no anchor is visible), so only the state drives it.",
+        f"Profile `{summary.settings['profile']}`; paths are relative to the output folder. The `{BLIND}` "
+        "row is the blind control: the same checkpoint and env seeds as `id`, every camera turned away from "
+        "the volume in its calibration (no anchor is visible), so only the state drives it.",
         "",
         "| evaluation | successes | success rate (%) | Wilson 95 % | code commit | videos |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
-    for row in summary["evaluations"]:
-        est = wilson_interval(row["successes"], row["episodes"])
+    for row in summary.evaluations:
+        est = wilson_interval(row.successes, row.episodes)
+        name = evaluation_name(row)
         lines.append(
-            f"| {row['name']} | {row['successes']}/{row['episodes']} | {100 * est.value:.1f} | "
-            f"{100 * est.low:.1f}-{100 * est.high:.1f} | {short_commit(row['commit'])} | "
-            f"`eval_{row['name']}/videos` |"
+            f"| {name} | {row.successes}/{row.episodes} | {100 * est.value:.1f} | "
+            f"{100 * est.low:.1f}-{100 * est.high:.1f} | {short_commit(row.commit)} | `eval_{name}/videos` |"
         )
-    counts = {row["name"]: (row["successes"], row["episodes"]) for row in summary["evaluations"]}
+    counts = {evaluation_name(row): (row.successes, row.episodes) for row in summary.evaluations}
     margin = blind_margin(counts["id"], counts[BLIND])
     lines += ["", margin]
     lines += ["", "## Stages", "", "| stage | seconds | command |", "| --- | --- | --- |"]
-    for stage in summary["stages"]:
+    for stage in summary.results["stages"]:
         seconds = "-" if stage["seconds"] is None else f"{stage['seconds']:.0f}"
         lines.append(f"| {stage['name']} | {seconds} | `{stage['command']}` |")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -284,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
         source = args.summary or out / SUMMARY
         if not source.is_file():
             parser.error(f"--report-only: expected a summary file, got none at {source}")
-        margin = write_report(json.loads(source.read_text()), out / "report.md")
+        margin = write_report(read_run_summary(source, PROTOCOL), out / "report.md")
         print(f"{margin} Report: {out / 'report.md'}")
         return 0
     base = PROFILES[args.profile]
@@ -305,11 +316,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     for name in (n for n, s in status.items() if s == "reused"):
         print(f"[{name}] already done (same command and inputs), reusing its result")
-    summary = summarise(runs, out, args.profile)
-    (out / SUMMARY).write_text(json.dumps(summary, indent=2) + "\n")
+    summary = summarise(runs, out, args.profile, code_commit())
+    write_run_summary(out / SUMMARY, summary)
     report = out / "report.md"
     margin = write_report(summary, report)
-    counts = ", ".join(f"{r['name']} {r['successes']}/{r['episodes']}" for r in summary["evaluations"])
+    counts = ", ".join(f"{evaluation_name(r)} {r.successes}/{r.episodes}" for r in summary.evaluations)
     print(f"Done in {sum(timings.values()):.0f} s: success {counts}. {margin} Report: {report}")
     return 0
 

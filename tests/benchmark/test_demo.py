@@ -1,26 +1,23 @@
 """The README's main job (`omnid-demo`): its report's blind-control margin, argument errors, the CPU profile's
 training command. (The command at tiny sizes: tests/e2e/test_omnid_demo.py.)"""
 
-import json
-
 import pytest
 from gym_omnid import TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark.demo import PROFILES, blind_margin, main, train_command, write_report
 from lerobot_omnid.benchmark.methods import method_flags
 from lerobot_omnid.benchmark.plan import MINI
+from lerobot_omnid.measure.results import EvalRecord, RunSummary, write_run_summary
 
 
-def summary(id_counts: tuple[int, int], blind_counts: tuple[int, int]) -> dict:
-    evaluations = [("id", id_counts), ("position_ood", (1, 10)), ("id_blind", blind_counts)]
-    return {
-        "profile": "cpu",
-        "evaluations": [
-            {"name": name, "successes": s, "episodes": n, "commit": "0123456789abcdef"}
-            for name, (s, n) in evaluations
-        ],
-        "stages": [{"name": "train", "seconds": 806.4, "command": "lerobot-train --steps=1000"}],
-    }
+def summary(id_counts: tuple[int, int], blind_counts: tuple[int, int]) -> RunSummary:
+    cells = [("id", "", id_counts), ("position_ood", "", (1, 10)), ("id", "blind", blind_counts)]
+    evaluations = [
+        EvalRecord(("omnid", "select_apple", setting), control, None, None, s, n, "x", "0123456789abcdef")
+        for setting, control, (s, n) in cells
+    ]
+    stages = [{"name": "train", "seconds": 806.4, "command": "lerobot-train --steps=1000"}]
+    return RunSummary("omnid-demo", {"profile": "cpu"}, evaluations, {"stages": stages})
 
 
 def test_report_gives_the_blind_control_beside_the_success_rate(tmp_path):
@@ -37,8 +34,7 @@ def test_report_gives_the_blind_control_beside_the_success_rate(tmp_path):
 
 
 def test_report_only_rebuilds_the_report_from_a_summary_and_runs_nothing(tmp_path, capsys):
-    source = tmp_path / "kept.json"
-    source.write_text(json.dumps(summary((8, 10), (1, 10))))
+    source = write_run_summary(tmp_path / "kept.json", summary((8, 10), (1, 10)))
     out = tmp_path / "out"
     assert main(["--out", str(out), "--report-only", "--summary", str(source)]) == 0
     assert "| id | 8/10 | 80.0 |" in (out / "report.md").read_text()

@@ -33,8 +33,11 @@ def test_main_job_writes_report_and_reuses_finished_stages(first_demo_run):
     ).is_file() and "--policy.calibration_path=controls/blind.json" in report
     assert str(out) not in report  # paths relative to the output folder: a committed summary names no machine
     summary = json.loads((out / "summary.json").read_text())
-    assert [e["name"] for e in summary["evaluations"]] == ["id", "position_ood", "id_blind"]
-    assert all(stage["seconds"] is not None for stage in summary["stages"])
+    assert summary["protocol"] == "omnid-demo"
+    cells = [(e["setting"], e["control"]) for e in summary["evaluations"]]
+    assert cells == [("id", ""), ("position_ood", ""), ("id", "blind")]
+    assert all(stage["seconds"] is not None for stage in summary["results"]["stages"])
+    assert all(str(out) not in e["source"] for e in summary["evaluations"])
     assert (out / "train" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors").is_file()
     assert list((out / "eval_id" / "videos").rglob("*.mp4"))
     assert (out / "logs" / "train.log").is_file()
