@@ -4,7 +4,6 @@ options every protocol command shares."""
 from __future__ import annotations
 
 import argparse
-import json
 from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any
@@ -65,25 +64,9 @@ def csv_of(
 
 def add_protocol_options(parser: argparse.ArgumentParser) -> None:
     """``--dry-run``, ``--report-only`` and ``--summary``: what every protocol on the experiment engine
-    offers besides running (see :func:`report_from_summary`)."""
+    offers besides running (see :func:`lerobot_omnid.measure.engine.report_from_summary`)."""
     parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
     parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
     parser.add_argument(
         "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
     )
-
-
-def report_from_summary(
-    parser: argparse.ArgumentParser,
-    args: argparse.Namespace,
-    out: Path,
-    write_report: Callable[[dict, Path], object],
-) -> bool:
-    """With ``--summary``: ``write_report(summary, <out>/report.md)`` from that file alone (a committed run
-    summary; no run folder needed), and True; without it, False. ``--summary`` needs ``--report-only``."""
-    if args.summary is None:
-        return False
-    if not args.report_only:
-        parser.error("--summary: expected with --report-only, got it without")
-    write_report(json.loads(args.summary.read_text()), out / "report.md")
-    return True

@@ -27,7 +27,6 @@ and ``<out>/summary.json``; ``--report-only --summary FILE`` rebuilds the report
 from __future__ import annotations
 
 import argparse
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -36,20 +35,29 @@ from gym_omnid.metaworld_suite import DEFAULT_CAMERAS, FIXED_CAMERAS, STATE_DIM
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import input_features, method_flags
 from lerobot_omnid.benchmark.plan import MINI, TRAIN_SEED
-from lerobot_omnid.cli import add_protocol_options, report_from_summary
+from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
+    code_commit,
     is_done,
     plan,
+    report_from_summary,
     run_protocol,
     stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    SUMMARY,
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    write_run_summary,
+)
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 
 TASKS = ("assembly-v3", "disassemble-v3", "stick-push-v3", "push-v3", "pick-place-wall-v3")
+PROTOCOL = "metaworld_comparison"
 PUBLISHED = {  # task: (DP3, image-based Diffusion Policy) success %, DP3 paper Tables I and XVIII
     "assembly-v3": (99, 15),
     "disassemble-v3": (69, 43),
@@ -149,34 +157,29 @@ def protocol(out: Path, tasks: Sequence[str], models: Sequence[str]) -> list[Run
     return plan(runs, out)
 
 
-def summarise(out: Path, runs: Sequence[Run]) -> dict:
+def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunSummary:
     """Every finished evaluation of this plan: model, task, control, env-seed range, counts, commit."""
-    rows = []
+    evaluations = []
     for run in runs:
         if run.kind != "eval" or not is_done(run):
             continue
         blind, model, task, seed = run.output.relative_to(out).parts
-        successes, episodes = read_eval_info(run.output / "eval_info.json")
-        rows.append(
-            {
-                "model": model,
-                "task": task,
-                "control": "blind" if blind == "eval_blind" else "",
-                "seed": int(seed.removeprefix("seed")),
-                "successes": successes,
-                "episodes": episodes,
-                "commit": stamp_commit(run),
-            }
+        counts = read_eval_info(run.output / "eval_info.json")
+        control = "blind" if blind == "eval_blind" else ""
+        source = str(run.output.relative_to(out))
+        first = int(seed.removeprefix("seed"))
+        record = EvalRecord(
+            (model, task, "id"), control, TRAIN_SEED, first, *counts, source, stamp_commit(run)
         )
-    return {
+        evaluations.append(record)
+    settings = {
         "steps": STEPS,
         "demonstrations": DEMONSTRATIONS,
         "image_size": IMAGE_SIZE,
         "episode_length": EPISODE_LENGTH,
         "test_seeds": list(TEST_SEEDS),
-        "published": PUBLISHED,
-        "results": rows,
     }
+    return RunSummary(PROTOCOL, settings, evaluations, {"published": PUBLISHED}, commit)
 
 
 def count_text(counts: tuple[int, int] | None) -> str:
@@ -186,15 +189,13 @@ def count_text(counts: tuple[int, int] | None) -> str:
     return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
 
 
-def write_report(summary: dict, path: Path) -> None:
+def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md``: per task and model the success pooled over the test ranges (each range too), its
     blind control, Fisher p of OmniD against the others, the published numbers beside."""
     cells: dict[tuple[str, str, str], dict[int, tuple[int, int]]] = {}
-    for r in summary["results"]:
-        cells.setdefault((r["model"], r["task"], r["control"]), {})[r["seed"]] = (
-            r["successes"],
-            r["episodes"],
-        )
+    for r in summary.evaluations:
+        cells.setdefault((r.key[0], r.key[1], r.control), {})[r.eval_seed] = (r.successes, r.episodes)
+    settings, published = summary.settings, summary.results["published"]
 
     def pooled(model: str, task: str, control: str = "") -> tuple[int, int] | None:
         found = cells.get((model, task, control))
@@ -205,9 +206,9 @@ def write_report(summary: dict, path: Path) -> None:
     lines = [
         "# MetaWorld: OmniD against LeRobot's DP (final checkpoint), published numbers beside",
         "",
-        f"{summary['demonstrations']} demonstrations per task, {summary['image_size']} px, "
-        f"{summary['steps']} training steps, episodes of at most {summary['episode_length']} steps; test env "
-        f"seeds from {', '.join(map(str, summary['test_seeds']))} (per range: second table). Published: "
+        f"{settings['demonstrations']} demonstrations per task, {settings['image_size']} px, "
+        f"{settings['steps']} training steps, episodes of at most {settings['episode_length']} steps; test "
+        f"env seeds from {', '.join(map(str, settings['test_seeds']))} (per range: second table). Published: "
         "DP3 paper, best 5 evaluations of 3 training seeds, MetaWorld v2, one 84 px camera (not ours).",
         "",
         "| task | " + " | ".join(f"{m} | {m} blind" for m in models) + " | published DP3 | published DP |",
@@ -215,11 +216,11 @@ def write_report(summary: dict, path: Path) -> None:
     ]
     for task in tasks:
         row = [f"{count_text(pooled(m, task))} | {count_text(pooled(m, task, 'blind'))}" for m in models]
-        dp3, dp = summary["published"][task]
+        dp3, dp = published[task]
         lines.append(f"| {task} | " + " | ".join(row) + f" | {dp3} % | {dp} % |")
     lines += ["", "| task | env seeds | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
     for task in tasks:
-        for seed in summary["test_seeds"]:
+        for seed in settings["test_seeds"]:
             row = [count_text(cells.get((m, task, ""), {}).get(seed)) for m in models]
             lines.append(f"| {task} | from {seed} | " + " | ".join(row) + " |")
     lines += ["", "| task | comparison | Fisher p |", "|---|---|---|"]
@@ -240,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if report_from_summary(parser, args, out, write_report):
+    if report_from_summary(parser, args, out, PROTOCOL, write_report):
         return 0
     tasks, models = args.tasks.split(","), args.models.split(",")
     if unknown := [t for t in tasks if t not in TASKS]:
@@ -249,10 +250,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--models: expected names from {','.join(MODELS)}, got {','.join(unknown)}")
     runs = protocol(out, tasks, models)
 
+    commit = code_commit()
+
     def write_outputs() -> None:
-        summary = summarise(out, runs)
+        summary = summarise(out, runs, commit)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        write_run_summary(out / SUMMARY, summary)
         write_report(summary, out / "report.md")
 
     run_protocol(runs, out, "metaworld", write_outputs, args.dry_run, args.report_only)

@@ -44,7 +44,7 @@ from gym_omnid import TRAIN_CAMERAS
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import CAMERA_A, finetune_flags, method_flags
 from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, MINI, TASK0, TRAIN_SEED
-from lerobot_omnid.cli import add_protocol_options, report_from_summary
+from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
@@ -52,11 +52,18 @@ from lerobot_omnid.measure.engine import (
     code_commit,
     is_done,
     plan,
+    report_from_summary,
     run_protocol,
     stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    SUMMARY,
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    write_run_summary,
+)
 from lerobot_omnid.measure.stats import wilson_interval
 
 PRETRAINED = {  # name: options added to mini's OmniD
@@ -94,6 +101,7 @@ VALIDATION_SEED = 70_000
 VALIDATION_EPISODES = 20
 TIE_MARGIN = 1
 SELECTION_FILE = "selection.json"
+PROTOCOL = "new_camera"
 TRAIN_DATA, FEWSHOT_DATA = f"{TASK0}_bcde", f"{TASK0}_a_fewshot"  # the benchmark's folder names
 ALL_CAMERAS = (*CAMERA_A, *TRAIN_CAMERAS)
 REPLAY_DATA = f"{TASK0}_a_fewshot_replay"
@@ -240,45 +248,48 @@ def select(results: dict[str, tuple[int, int]]) -> str:
     return min(close, key=lambda h: HYPOTHESES[h].steps)
 
 
-def summarise(out: Path, runs: Sequence[Run]) -> dict:
+def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunSummary:
     """Each model's validation counts and the commit that made them (of the runs done for this plan), and
     the selection once every hypothesis is validated."""
     done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    results = {}
+    evaluations = []
     for model in [f"zero_shot_{name}" for name in PRETRAINED] + list(HYPOTHESES):
         if (folder := validation_dir(out, model)) in done:
-            successes, episodes = read_eval_info(folder / "eval_info.json")
-            results[model] = {
-                "successes": successes,
-                "episodes": episodes,
-                "commit": stamp_commit(done[folder]),
-            }
-    validated = {h: (results[h]["successes"], results[h]["episodes"]) for h in HYPOTHESES if h in results}
-    return {
+            counts = read_eval_info(folder / "eval_info.json")
+            source = str(folder.relative_to(out))
+            key = (model, TASK0, "validation")
+            commit_of_run = stamp_commit(done[folder])
+            evaluations.append(
+                EvalRecord(key, "", TRAIN_SEED, VALIDATION_SEED, *counts, source, commit_of_run)
+            )
+    validated = {r.key[0]: (r.successes, r.episodes) for r in evaluations if r.key[0] in HYPOTHESES}
+    settings = {
         "task": TASK0,
         "validation_seed": VALIDATION_SEED,
         "validation_episodes": VALIDATION_EPISODES,
         "hypotheses": {h: asdict(recipe) for h, recipe in HYPOTHESES.items()},
-        "results": results,
-        "selected": select(validated) if len(validated) == len(HYPOTHESES) else None,
     }
+    selected = select(validated) if len(validated) == len(HYPOTHESES) else None
+    return RunSummary(PROTOCOL, settings, evaluations, {"selected": selected}, commit)
 
 
-def write_report(summary: dict, path: Path) -> None:
+def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md``: each model's validation success on camera A, and the selection."""
-    first = summary["validation_seed"]
+    settings = summary.settings
+    first = settings["validation_seed"]
     lines = [
-        f"# A new camera from ten episodes: validation ({summary['task']}, camera A)",
+        f"# A new camera from ten episodes: validation ({settings['task']}, camera A)",
         "",
-        f"Env seeds {first}-{first + summary['validation_episodes'] - 1}, camera A only. Rule: the most "
+        f"Env seeds {first}-{first + settings['validation_episodes'] - 1}, camera A only. Rule: the most "
         f"successes; within {TIE_MARGIN} of the most, the fewest fine-tuning steps.",
         "",
         "| model | pre-trained | fine-tuning | validation success (Wilson 95 %) | selected |",
         "|---|---|---|---|---|",
     ]
-    for model, result in summary["results"].items():
-        est = wilson_interval(result["successes"], result["episodes"])
-        hypothesis = summary["hypotheses"].get(model)
+    for result in summary.evaluations:
+        model = result.key[0]
+        est = wilson_interval(result.successes, result.episodes)
+        hypothesis = settings["hypotheses"].get(model)
         if hypothesis:
             lr = "mini's lr" if hypothesis["lr"] is None else f"lr {hypothesis['lr']:g}"
             frozen = ", ".join(hypothesis.get("frozen", ()))
@@ -286,9 +297,9 @@ def write_report(summary: dict, path: Path) -> None:
             tuning = f"{hypothesis['steps']} steps, {lr}" + (f", {frozen} frozen" if frozen else "")
         else:
             pretrained, tuning = model.removeprefix("zero_shot_"), "none (zero-shot)"
-        chosen = "**yes**" if model == summary["selected"] else ""
+        chosen = "**yes**" if model == summary.results["selected"] else ""
         lines.append(
-            f"| {model} | {pretrained} | {tuning} | {result['successes']}/{result['episodes']} "
+            f"| {model} | {pretrained} | {tuning} | {result.successes}/{result.episodes} "
             f"({100 * est.low:.1f}-{100 * est.high:.1f} %) | {chosen} |"
         )
     write_markdown(lines, path)
@@ -302,16 +313,18 @@ def main(argv: list[str] | None = None) -> int:
     add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if report_from_summary(parser, args, out, write_report):
+    if report_from_summary(parser, args, out, PROTOCOL, write_report):
         return 0
     runs = protocol(out)
+    commit = code_commit()
 
     def write_outputs() -> None:
-        summary = summarise(out, runs)
+        summary = summarise(out, runs, commit)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        if summary["selected"] and not (out / SELECTION_FILE).is_file():
-            selection = {"selected": summary["selected"], "rule": select.__doc__, "commit": code_commit()}
+        write_run_summary(out / SUMMARY, summary)
+        selected = summary.results["selected"]
+        if selected and not (out / SELECTION_FILE).is_file():
+            selection = {"selected": selected, "rule": select.__doc__, "commit": commit}
             (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
         write_report(summary, out / "report.md")
 

@@ -29,6 +29,7 @@ and ``<out>/summary.json``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
@@ -46,14 +47,31 @@ from lerobot_omnid.benchmark.plan import (
     TRAIN_SEED,
     setting_env,
 )
-from lerobot_omnid.cli import add_protocol_options, report_from_summary
-from lerobot_omnid.measure.engine import CHECKPOINT, Run, code_commit, describe_plan, execute, is_done, plan
+from lerobot_omnid.cli import add_protocol_options
+from lerobot_omnid.measure.engine import (
+    CHECKPOINT,
+    Run,
+    code_commit,
+    describe_plan,
+    execute,
+    is_done,
+    plan,
+    report_from_summary,
+)
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    SUMMARY,
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    tags_of,
+    write_run_summary,
+)
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 PROFILE = PROFILES["mini"]
+PROTOCOL = "readout_selection"
 PAPER_READOUT = "flatten"
 READOUT_CHANNELS = {PAPER_READOUT: 1}  # compressed channels; others keep mini's
 VALIDATION_SEED = 50_000  # first env seed of the closed-loop validation episodes
@@ -254,57 +272,74 @@ def count_text(counts: list[int] | None) -> str:
     return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
 
 
-def report(out: Path, done: set[Path]) -> dict:
+def report(out: Path, done: set[Path], commit: str | None = None) -> RunSummary:
     """``report.md`` and ``summary.json`` from the runs ``done`` (their outputs); returns the summary."""
-    test: dict[str, dict[str, list[int]]] = {}
+    evaluations, open_loop = [], {}
+    for readout, result in validation_results(out, done).items():
+        source = str(eval_dir(out, "validation", readout, "id").relative_to(out))
+        counts = (result["successes"], result["episodes"])
+        record = EvalRecord((readout, TASK0, "id"), "", TRAIN_SEED, VALIDATION_SEED, *counts, source)
+        evaluations.append(dataclasses.replace(record, tags=tags_of({"phase": "validation"})))
+        open_loop[readout] = {"position_cm": result["position_cm"], "gripper": result["gripper"]}
     for readout in PLANE_READOUTS:
         for setting in (*TEST_SETTINGS, "id_blind"):
-            info = eval_dir(out, "test", readout, setting) / "eval_info.json"
-            if info.parent in done:
-                test.setdefault(readout, {})[setting] = list(read_eval_info(info))
-    summary = {
+            folder = eval_dir(out, "test", readout, setting)
+            if folder in done:
+                counts = read_eval_info(folder / "eval_info.json")
+                key = (readout, TASK0, setting.removesuffix("_blind"))
+                control = "blind" if setting.endswith("_blind") else ""
+                record = EvalRecord(
+                    key, control, TRAIN_SEED, TEST_SEED, *counts, str(folder.relative_to(out))
+                )
+                evaluations.append(dataclasses.replace(record, tags=tags_of({"phase": "test"})))
+    settings = {
         "task": TASK0,
         "steps": PROFILE.steps,
         "train_seed": TRAIN_SEED,
-        "validation": {
-            "seed": VALIDATION_SEED,
-            "heldout_seed": VALIDATION_HELDOUT_SEED,
-            "results": validation_results(out, done),
-        },
-        "selection": json.loads((out / SELECTION_FILE).read_text())
-        if (out / SELECTION_FILE).is_file()
-        else None,
-        "test": {"seed": TEST_SEED, "results": test},
+        "validation_seed": VALIDATION_SEED,
+        "heldout_seed": VALIDATION_HELDOUT_SEED,
+        "test_seed": TEST_SEED,
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    selection = json.loads((out / SELECTION_FILE).read_text()) if (out / SELECTION_FILE).is_file() else None
+    results = {"open_loop": open_loop, "selection": selection}
+    summary = RunSummary(PROTOCOL, settings, evaluations, results, commit)
+    write_run_summary(out / SUMMARY, summary)
     write_report(summary, out / "report.md")
     return summary
 
 
-def write_report(summary: dict, path: Path) -> None:
+def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md`` (validation table with the selection, test table with Fisher tests) from a
     ``summary.json``, this run's or a committed one."""
-    selection, test = summary["selection"], summary["test"]["results"]
-    lines = [f"# Choosing the plane readout ({summary['task']}, mini sizes)", ""]
-    seeds = (
-        f"env seeds {summary['validation']['seed']}-{summary['validation']['seed'] + VALIDATION_EPISODES - 1}"
-    )
+    selection, open_loop = summary.results["selection"], summary.results["open_loop"]
+    test: dict[str, dict[str, list[int]]] = {}
+    validation: dict[str, list[int]] = {}
+    for r in summary.evaluations:
+        if r.tag("phase") == "validation":
+            validation[r.key[0]] = [r.successes, r.episodes]
+        else:
+            setting = r.key[2] + ("_blind" if r.control == "blind" else "")
+            test.setdefault(r.key[0], {})[setting] = [r.successes, r.episodes]
+    settings = summary.settings
+    lines = [f"# Choosing the plane readout ({settings['task']}, mini sizes)", ""]
+    seeds = f"env seeds {settings['validation_seed']}-{settings['validation_seed'] + VALIDATION_EPISODES - 1}"
     lines += [
         f"Validation: ID success on {seeds}; open-loop error on {VALIDATION_HELDOUT_EPISODES} expert "
-        f"episodes from env seed {summary['validation']['heldout_seed']}. Rule: most successes; within "
+        f"episodes from env seed {settings['heldout_seed']}. Rule: most successes; within "
         f"{TIE_MARGIN} of the most, the lowest open-loop TCP error.",
         "",
         "| readout | validation success (Wilson 95 %) | open-loop TCP (cm) | gripper | selected |",
         "|---|---|---|---|---|",
     ]
-    for name, r in summary["validation"]["results"].items():
+    for name, counts in validation.items():
         chosen = "**yes**" if selection and selection["selected"] == name else ""
+        errors = open_loop[name]
         lines.append(
-            f"| {name} | {count_text([r['successes'], r['episodes']])} | {r['position_cm']:.2f} | "
-            f"{r['gripper']:.3f} | {chosen} |"
+            f"| {name} | {count_text(counts)} | {errors['position_cm']:.2f} | {errors['gripper']:.3f} | "
+            f"{chosen} |"
         )
     if test and selection:
-        first = summary["test"]["seed"]
+        first = settings["test_seed"]
         lines += [
             "",
             f"Test: env seeds {first}-{first + TEST_EPISODES - 1}, the selected `{selection['selected']}` "
@@ -340,7 +375,7 @@ def main(argv: list[str] | None = None) -> None:
     add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if report_from_summary(parser, args, out, write_report):
+    if report_from_summary(parser, args, out, PROTOCOL, write_report):
         return
     data = args.data.resolve() if args.data else out / "data" / TRAIN_DATA
     if args.data and (found := commands.recorded_episodes(data)) != PROFILE.episodes:
@@ -366,7 +401,7 @@ def main(argv: list[str] | None = None) -> None:
             selection_file.write_text(json.dumps(selection, indent=2) + "\n")
     # The test's finished runs are reported whether or not this call asked for them.
     reported = protocol(out, data, args.device, not args.data, selected or read_selection(selection_file))
-    report(out, {r.output for r in reported if is_done(r)})
+    report(out, {r.output for r in reported if is_done(r)}, commit)
 
 
 def read_selection(path: Path) -> str | None:

@@ -26,7 +26,7 @@ Fisher tests of each pair, the code commit of each evaluation, from its stamp) a
 from __future__ import annotations
 
 import argparse
-import json
+import dataclasses
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
@@ -34,7 +34,7 @@ from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import method_flags
 from lerobot_omnid.benchmark.plan import BANDS, PROFILES, TRAIN_SEED
-from lerobot_omnid.cli import add_protocol_options, report_from_summary
+from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
@@ -44,13 +44,22 @@ from lerobot_omnid.measure.engine import (
     execute,
     is_done,
     plan,
+    report_from_summary,
     stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    SUMMARY,
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    tags_of,
+    write_run_summary,
+)
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference, wilson_interval
 
 TASK = "select_apple"
+PROTOCOL = "rigs_and_wrist"
 PROFILE = PROFILES["mini"]
 EVAL_SEED = 1000  # env seeds 1000 ... : the benchmark's eval seed 1, disjoint from the recordings' 0 ... 600
 WRIST_CAMERAS = (*TRAIN_CAMERAS, WRIST_CAMERA)
@@ -141,47 +150,43 @@ def cells() -> list[tuple[str, str, str, bool]]:
     ]
 
 
-def report(out: Path, episodes: int, checkpoints: dict[str, Path], runs: list[Run]) -> None:
+def report(
+    out: Path, episodes: int, checkpoints: dict[str, Path], runs: list[Run], commit: str | None = None
+) -> None:
     """``report.md`` and ``summary.json`` from the evaluations of ``runs`` done for this plan."""
     done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    rows = []
+    evaluations = []
     for model, rig, layout, blind in cells():
         folder = eval_dir(out, model, rig, layout, blind)
         if folder in done:
             s, n = read_eval_info(folder / "eval_info.json")
-            rows.append(
-                {
-                    "model": model,
-                    "rig": rig,
-                    "layout": layout,
-                    "control": "blind" if blind else "",
-                    "successes": s,
-                    "episodes": n,
-                    "commit": stamp_commit(done[folder]),
-                }
+            control, source = "blind" if blind else "", str(folder.relative_to(out))
+            record = EvalRecord((model, TASK, layout), control, TRAIN_SEED, EVAL_SEED, s, n, source)
+            evaluations.append(
+                dataclasses.replace(record, commit=stamp_commit(done[folder]), tags=tags_of({"rig": rig}))
             )
-    summary = {
+    settings = {
         "task": TASK,
         "episodes_per_cell": episodes,
         "eval_seed": EVAL_SEED,
         "train_seed": TRAIN_SEED,
         "steps": PROFILE.steps,
-        "results": rows,
         "checkpoints": {m: "given" if m in checkpoints else "trained here" for m in MODELS},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    summary = RunSummary(PROTOCOL, settings, evaluations, {}, commit)
+    write_run_summary(out / SUMMARY, summary)
     write_report(summary, out / "report.md")
 
 
-def write_report(summary: dict, path: Path) -> None:
+def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md`` (every cell with its Wilson interval, a Fisher test per pair) from a ``summary.json``,
     this run's or a committed one."""
     counts = {
-        (r["model"], r["rig"], r["layout"], r["control"] == "blind"): (r["successes"], r["episodes"])
-        for r in summary["results"]
+        (r.key[0], r.tag("rig"), r.key[2], r.control == "blind"): (r.successes, r.episodes)
+        for r in summary.evaluations
     }
-    commits = ", ".join(sorted({str(r["commit"]) for r in summary["results"]})) or "none"
-    lines = [f"# Per-frame calibration: rigs and wrist camera ({summary['task']}, mini sizes)", ""]
+    commits = ", ".join(sorted({str(r.commit) for r in summary.evaluations})) or "none"
+    lines = [f"# Per-frame calibration: rigs and wrist camera ({summary.settings['task']}, mini sizes)", ""]
     lines += [f"Commits: {commits}.", ""]
     lines += ["| model | rig | layout | control | success | Wilson 95 % |", "|---|---|---|---|---|---|"]
     for (model, rig, layout, blind), (s, n) in counts.items():
@@ -244,7 +249,7 @@ def main(argv: list[str] | None = None) -> None:
     add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if report_from_summary(parser, args, out, write_report):
+    if report_from_summary(parser, args, out, PROTOCOL, write_report):
         return
     given = {"one_rig": args.one_rig_checkpoint.resolve()} if args.one_rig_checkpoint else {}
     for path in given.values():
@@ -255,9 +260,10 @@ def main(argv: list[str] | None = None) -> None:
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return
+    commit = code_commit()
     if not args.report_only:
-        execute(runs, out, commit=code_commit(), desc="rigs_and_wrist", stop_on_failure=True)
-    report(out, args.eval_episodes, given, runs)
+        execute(runs, out, commit=commit, desc="rigs_and_wrist", stop_on_failure=True)
+    report(out, args.eval_episodes, given, runs, commit)
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ from gym_omnid import TASKS, TRAIN_CAMERAS
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import method_flags
 from lerobot_omnid.benchmark.plan import PROFILES, TRAIN_SEED, train_folder
-from lerobot_omnid.cli import add_protocol_options, report_from_summary
+from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
@@ -47,10 +47,19 @@ from lerobot_omnid.measure.engine import (
     execute,
     is_done,
     plan,
+    report_from_summary,
     stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    SUMMARY,
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    read_run_summary,
+    tags_of,
+    write_run_summary,
+)
 from lerobot_omnid.measure.stats import wilson_interval
 
 PROFILE = PROFILES["mini"]
@@ -60,6 +69,7 @@ VALIDATION_SEED = 60_000
 VALIDATION_EPISODES = 20
 THRESHOLD = 6  # validation successes of VALIDATION_EPISODES (30 %): the task is being done, not stumbled on
 SIZING_FILE = "sizing.json"
+PROTOCOL = "task_sizing"
 
 
 def train_dir(out: Path, task: str, steps: int) -> Path:
@@ -145,74 +155,92 @@ def protocol(out: Path, tasks: Sequence[str], known: Known | None = None) -> lis
     return plan(runs, out)
 
 
-def summarise(out: Path, runs: Sequence[Run], tasks: Sequence[str], known: Known | None = None) -> dict:
-    """Per task the validation counts of every budget done for this plan or ``known``, the commit that
-    measured each here (known ones: as their summary says), and the rule's budget."""
+def summarise(
+    out: Path,
+    runs: Sequence[Run],
+    tasks: Sequence[str],
+    known: Known | None = None,
+    commit: str | None = None,
+) -> RunSummary:
+    """Per task the validation counts of every budget done for this plan or ``known`` (a record each,
+    tagged with its steps, with the commit that measured it; known ones: as their summary says), and the
+    rule's budget (``results["budgets"]``)."""
     done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    results = {}
+    evaluations, budgets = [], {}
     for task in tasks:
         given = (known or {}).get(task, {})
         counts = {steps: c[:2] for steps, c in given.items()}
-        commits = {str(steps): c[2] for steps, c in given.items()}
+        commits = {steps: c[2] for steps, c in given.items()}
         for steps in BUDGETS:
             if (folder := validation_dir(out, task, steps)) in done:
                 counts[steps] = read_eval_info(folder / "eval_info.json")
-                commits[str(steps)] = stamp_commit(done[folder])
-        results[task] = {
-            "validation": {str(steps): list(counts[steps]) for steps in BUDGETS if steps in counts},
-            "commits": {steps: commits[steps] for steps in map(str, BUDGETS) if steps in commits},
-            "budget": size(counts),
-        }
-    return {
+                commits[steps] = stamp_commit(done[folder])
+        for steps in (b for b in BUDGETS if b in counts):
+            source = str(validation_dir(out, task, steps).relative_to(out))
+            record = EvalRecord(
+                (METHOD, task, "validation"),
+                "",
+                TRAIN_SEED,
+                VALIDATION_SEED,
+                *counts[steps],
+                source,
+                commits.get(steps),
+                tags=tags_of({"steps": steps}),
+            )
+            evaluations.append(record)
+        budgets[task] = size(counts)
+    settings = {
         "method": METHOD,
         "budgets": list(BUDGETS),
         "threshold": THRESHOLD,
         "validation_seed": VALIDATION_SEED,
         "validation_episodes": VALIDATION_EPISODES,
         "train_seed": TRAIN_SEED,
-        "tasks": results,
+        "tasks": list(tasks),
     }
+    return RunSummary(PROTOCOL, settings, evaluations, {"budgets": budgets}, commit)
 
 
 def read_known(paths: Sequence[Path]) -> Known:
     """The validation counts of committed summaries; a (task, budget) given twice is an error."""
     known: Known = {}
     for path in paths:
-        for task, result in json.loads(path.read_text())["tasks"].items():
-            for steps, (successes, episodes) in result["validation"].items():
-                if int(steps) in known.setdefault(task, {}):
-                    raise ValueError(
-                        f"--also: expected each task and budget once, got {task} at {steps} steps again "
-                        f"in {path}"
-                    )
-                known[task][int(steps)] = (successes, episodes, result.get("commits", {}).get(steps))
+        for record in read_run_summary(path, PROTOCOL).evaluations:
+            task, steps = record.key[1], int(record.tag("steps"))
+            if steps in known.setdefault(task, {}):
+                raise ValueError(
+                    f"--also: expected each task and budget once, got {task} at {steps} steps again in {path}"
+                )
+            known[task][steps] = (record.successes, record.episodes, record.commit)
     return known
 
 
-def write_report(summary: dict, path: Path) -> None:
+def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md``: per task the validation success at each budget and the budget the rule gives."""
-    budgets = summary["budgets"]
-    first = summary["validation_seed"]
+    settings = summary.settings
+    budgets = settings["budgets"]
+    first = settings["validation_seed"]
     lines = [
         "# Sizing the tasks: DP's validation success per training budget (mini data)",
         "",
-        f"`{summary['method']}`, `lerobot-train --seed={summary['train_seed']}`; ID on env seeds {first}-"
-        f"{first + summary['validation_episodes'] - 1}; rule: the first budget with at least "
-        f"{summary['threshold']}/{summary['validation_episodes']} successes.",
+        f"`{settings['method']}`, `lerobot-train --seed={settings['train_seed']}`; ID on env seeds {first}-"
+        f"{first + settings['validation_episodes'] - 1}; rule: the first budget with at least "
+        f"{settings['threshold']}/{settings['validation_episodes']} successes.",
         "",
         "| task | " + " | ".join(f"{b} steps (Wilson 95 %)" for b in budgets) + " | budget |",
         "|---|" + "---|" * (len(budgets) + 1),
     ]
-    for task, result in summary["tasks"].items():
+    counts = {(r.key[1], int(r.tag("steps"))): (r.successes, r.episodes) for r in summary.evaluations}
+    for task in settings["tasks"]:
         cells = []
         for b in budgets:
-            counts = result["validation"].get(str(b))
-            if counts is None:
+            if (task, b) not in counts:
                 cells.append("-")
                 continue
-            est = wilson_interval(*counts)
-            cells.append(f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)")
-        budget = result["budget"]
+            successes, episodes = counts[task, b]
+            est = wilson_interval(successes, episodes)
+            cells.append(f"{successes}/{episodes} ({100 * est.low:.1f}-{100 * est.high:.1f} %)")
+        budget = summary.results["budgets"][task]
         chosen = f"not learned within {budgets[-1]} steps" if budget is None else str(budget)
         lines.append(f"| {task} | " + " | ".join(cells) + f" | {chosen} |")
     write_markdown(lines, path)
@@ -237,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
     add_protocol_options(parser)
     args = parser.parse_args(argv)
     out = args.out.resolve()
-    if report_from_summary(parser, args, out, write_report):
+    if report_from_summary(parser, args, out, PROTOCOL, write_report):
         return 0
     tasks = [t for t in args.tasks.split(",") if t]
     if unknown := [t for t in tasks if t not in TASKS]:
@@ -250,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return 0
+    commit = code_commit()
     if not args.report_only:
         # Each pass runs what the validation so far calls for (a task below the threshold gets its next
         # budget in the next pass); the summary is rewritten after every finished run.
@@ -257,28 +286,30 @@ def main(argv: list[str] | None = None) -> int:
             execute(
                 runs,
                 out,
-                commit=code_commit(),
+                commit=commit,
                 desc="task sizing",
-                on_done=lambda _, runs=runs: write_outputs(out, runs, tasks, known),
+                on_done=lambda _, runs=runs: write_outputs(out, runs, tasks, known, commit),
                 stop_on_failure=True,
             )
             runs = protocol(out, tasks, known)
-    write_outputs(out, runs, tasks, known)
+    write_outputs(out, runs, tasks, known, commit)
     return 0
 
 
-def write_outputs(out: Path, runs: Sequence[Run], tasks: Sequence[str], known: Known) -> None:
+def write_outputs(
+    out: Path, runs: Sequence[Run], tasks: Sequence[str], known: Known, commit: str | None = None
+) -> None:
     """``summary.json``, ``sizing.json`` (each decided task's training steps) and ``report.md`` from the
     runs done and the ``known`` counts."""
-    summary = summarise(out, runs, tasks, known)
+    summary = summarise(out, runs, tasks, known, commit)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_run_summary(out / SUMMARY, summary)
     # What the six-task benchmark trains for (`omnid-benchmark --task-steps`): a task not learned within
     # the last budget is measured at that budget; a task still pending has no entry yet.
     steps = {
-        task: BUDGETS[-1] if result["budget"] is None else result["budget"]
-        for task, result in summary["tasks"].items()
-        if result["budget"] != "pending"
+        task: BUDGETS[-1] if budget is None else budget
+        for task, budget in summary.results["budgets"].items()
+        if budget != "pending"
     }
     (out / SIZING_FILE).write_text(json.dumps(steps, indent=2) + "\n")
     write_report(summary, out / "report.md")

@@ -13,6 +13,7 @@ they change, and everything downstream, and never reports results made for anoth
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import shlex
@@ -26,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
+
+from lerobot_omnid.measure.results import RunSummary, read_run_summary
 
 STAMPS = "stamps"
 """Folder of the stamps under a campaign's output folder."""
@@ -309,3 +312,25 @@ def stamp_commit(run: Run) -> str | None:
     """The commit the code had when ``run`` was made (its stamp's), or None."""
     stamp = read_stamp(run)
     return stamp.get("commit") if stamp else None
+
+
+def report_from_summary(
+    parser: argparse.ArgumentParser,
+    args: argparse.Namespace,
+    out: Path,
+    protocol: str,
+    write_report: Callable[[RunSummary, Path], object],
+) -> bool:
+    """With ``--summary``: ``write_report(summary, <out>/report.md)`` from that run summary of ``protocol``
+    alone (a committed one; no run folder needed), and True; without it, False. ``--summary`` needs
+    ``--report-only``."""
+    if args.summary is None:
+        return False
+    if not args.report_only:
+        parser.error("--summary: expected with --report-only, got it without")
+    try:
+        summary = read_run_summary(args.summary, protocol)
+    except ValueError as e:
+        parser.error(f"--summary: {e}")
+    write_report(summary, out / "report.md")
+    return True

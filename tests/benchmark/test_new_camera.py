@@ -20,6 +20,7 @@ from lerobot_omnid.benchmark.plan import (
 from lerobot_omnid.benchmark.readout_selection import VALIDATION_HELDOUT_SEED, VALIDATION_SEED
 from lerobot_omnid.diagnostics.position_extrapolation import PROBE_SEED
 from lerobot_omnid.measure import engine
+from lerobot_omnid.measure.results import EvalRecord, RunSummary, write_run_summary
 
 
 def options(cmd: tuple[str, ...]) -> dict[str, str]:
@@ -113,16 +114,18 @@ def test_rule_takes_the_most_successes_then_the_shortest_fine_tuning(successes, 
 
 def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
     results = {"zero_shot_mini": (1, 20), "paper": (3, 20), "long": (7, 20), "long_frozen_head": (2, 20)}
-    summary = {
+    settings = {
         "task": TASK0,
         "validation_seed": nc.VALIDATION_SEED,
         "validation_episodes": nc.VALIDATION_EPISODES,
         "hypotheses": {h: dataclasses.asdict(recipe) for h, recipe in nc.HYPOTHESES.items()},
-        "results": {m: {"successes": s, "episodes": n, "commit": "abc"} for m, (s, n) in results.items()},
-        "selected": None,
     }
-    source = tmp_path / "summary.json"
-    source.write_text(json.dumps(summary))
+    evaluations = [
+        EvalRecord((m, TASK0, "validation"), "", 1000, nc.VALIDATION_SEED, s, n, "x", "abc")
+        for m, (s, n) in results.items()
+    ]
+    summary = RunSummary(nc.PROTOCOL, settings, evaluations, {"selected": None})
+    source = write_run_summary(tmp_path / "summary.json", summary)
     assert nc.main(["--out", str(tmp_path / "out"), "--report-only", "--summary", str(source)]) == 0
     report = (tmp_path / "out" / "report.md").read_text()
     assert "| zero_shot_mini | mini | none (zero-shot) | 1/20 (0.9-23.6 %) |  |" in report
@@ -143,9 +146,6 @@ def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
         (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
         engine.write_stamp(run, "abc", 1.0)
         summary = nc.summarise(tmp_path, runs)
-        assert summary["results"][hypothesis] == {
-            "successes": counts[hypothesis],
-            "episodes": 20,
-            "commit": "abc",
-        }
-        assert summary["selected"] == ("long" if len(summary["results"]) == len(counts) else None)
+        found = {r.key[0]: (r.successes, r.episodes, r.commit) for r in summary.evaluations}
+        assert found[hypothesis] == (counts[hypothesis], 20, "abc")
+        assert summary.results["selected"] == ("long" if len(found) == len(counts) else None)

@@ -100,7 +100,8 @@ def test_report_tables_the_validation_and_tests_selected_against_flatten(tmp_pat
     done = {rs.eval_dir(tmp_path, phase, r, "id") for phase in ("validation", "test") for r in PLANE_READOUTS}
     done = {folder for folder in done if folder.is_dir()} | {tmp_path / "offline" / r for r in PLANE_READOUTS}
     summary = rs.report(tmp_path, done)
-    assert summary["validation"]["results"]["bev_conv"]["successes"] == 11
+    validation = {r.key[0]: r.successes for r in summary.evaluations if r.tag("phase") == "validation"}
+    assert validation == {"flatten": 2, "bev_conv": 11}
     text = (tmp_path / "report.md").read_text()
     assert "| bev_conv | 11/20 (34.2-74.2 %) | 0.70 | 0.020 | **yes** |" in text
     assert "| flatten | 2/20 (2.8-30.1 %) | 1.50 | 0.020 |  |" in text
@@ -113,7 +114,7 @@ def test_report_leaves_out_runs_not_made_for_the_plan(tmp_path):
     offline = tmp_path / "offline" / "flatten" / rs.OFFLINE_OUTPUT
     offline.parent.mkdir(parents=True)
     offline.write_text(json.dumps({"position_cm": 1.5, "gripper": 0.02}))
-    assert rs.report(tmp_path, set())["validation"]["results"] == {}
+    assert rs.report(tmp_path, set()).evaluations == []
 
 
 def test_dry_run_plans_validation_then_test_once_selected(tmp_path, capsys):

@@ -9,6 +9,7 @@ from omnid_testing import COMMITTED_SUMMARIES
 
 from lerobot_omnid.benchmark import rigs_and_wrist as rw
 from lerobot_omnid.measure import engine
+from lerobot_omnid.measure.results import read_run_summary
 
 OUT = Path("out")
 
@@ -64,8 +65,8 @@ def test_report_gives_each_evaluation_its_own_commit_and_tests_the_pairs(tmp_pat
         (folder / "eval_info.json").write_text(json.dumps({"overall": overall}))
         engine.write_stamp(by_output[folder], commit, 1.0)
     rw.report(tmp_path, 30, {}, runs)
-    rows = json.loads((tmp_path / "summary.json").read_text())["results"]
-    assert {(r["model"], r["successes"], r["commit"]) for r in rows} == {
+    rows = read_run_summary(tmp_path, rw.PROTOCOL).evaluations
+    assert {(r.key[0], r.successes, r.commit) for r in rows} == {
         ("two_rigs", 7, "aaa"),
         ("one_rig", 4, "bbb"),
     }

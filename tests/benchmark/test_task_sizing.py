@@ -15,6 +15,7 @@ from lerobot_omnid.benchmark.readout_selection import VALIDATION_HELDOUT_SEED
 from lerobot_omnid.benchmark.readout_selection import VALIDATION_SEED as READOUT_VALIDATION_SEED
 from lerobot_omnid.diagnostics.position_extrapolation import PROBE_SEED
 from lerobot_omnid.measure import engine
+from lerobot_omnid.measure.results import EvalRecord, RunSummary, tags_of, write_run_summary
 
 
 def finish(out: Path, run: engine.Run, successes: int | None = None) -> None:
@@ -60,6 +61,12 @@ def test_validation_seeds_touch_no_other_seed_set():
     assert all(last < low or first > high for low, high in used)
 
 
+def validation_record(task: str, steps: int, successes: int, commit: str | None = None) -> EvalRecord:
+    key = ("diffusion", task, "validation")
+    record = EvalRecord(key, "", 1000, ts.VALIDATION_SEED, successes, 20, "x", commit)
+    return dataclasses.replace(record, tags=tags_of({"steps": steps}))
+
+
 def test_a_longer_budget_only_for_a_task_validated_below_the_threshold(tmp_path):
     tasks = ["select_apple", "get_coffee"]
     runs = ts.protocol(tmp_path, tasks)
@@ -77,25 +84,20 @@ def test_a_longer_budget_only_for_a_task_validated_below_the_threshold(tmp_path)
     for run in longer:
         finish(tmp_path, run, 0)
     summary = ts.summarise(tmp_path, ts.protocol(tmp_path, tasks), tasks)
-    assert summary["tasks"]["select_apple"] == {
-        "validation": {"1000": [6, 20]},
-        "commits": {"1000": "abc"},
-        "budget": 1000,
-    }
-    assert summary["tasks"]["get_coffee"]["budget"] is None  # not learned within the last budget
+    found = {(r.key[1], r.tag("steps")): (r.successes, r.episodes, r.commit) for r in summary.evaluations}
+    assert found[("select_apple", "1000")] == (6, 20, "abc") and ("select_apple", "3000") not in found
+    assert summary.results["budgets"]["select_apple"] == 1000
+    assert summary.results["budgets"]["get_coffee"] is None  # not learned within the last budget
 
 
 def test_budgets_of_committed_summaries_are_not_run_again(tmp_path):
     """A later session passes the earlier sessions' summaries with --also: a task decided there plans
     nothing, one validated below the threshold there plans only its next budget."""
-    earlier = {
-        "tasks": {
-            "select_apple": {"validation": {"1000": [9, 20]}, "commits": {"1000": "c1"}, "budget": 1000},
-            "get_coffee": {"validation": {"1000": [2, 20]}, "commits": {"1000": "c2"}, "budget": "pending"},
-        }
-    }
-    source = tmp_path / "earlier.json"
-    source.write_text(json.dumps(earlier))
+    earlier = [
+        validation_record("select_apple", 1000, 9, "c1"),
+        validation_record("get_coffee", 1000, 2, "c2"),
+    ]
+    source = write_run_summary(tmp_path / "earlier.json", RunSummary(ts.PROTOCOL, {}, earlier))
     known = ts.read_known([source])
     tasks = ["select_apple", "get_coffee", "texas_holdem"]
     runs = ts.protocol(tmp_path / "out", tasks, known)
@@ -106,8 +108,13 @@ def test_budgets_of_committed_summaries_are_not_run_again(tmp_path):
         f"validation/diffusion/texas_holdem/steps{ts.BUDGETS[0]}",
     ]
     summary = ts.summarise(tmp_path / "out", runs, tasks, known)
-    assert summary["tasks"]["select_apple"] == earlier["tasks"]["select_apple"]
-    assert summary["tasks"]["get_coffee"]["budget"] == "pending"
+    apple = [r for r in summary.evaluations if r.key[1] == "select_apple"]
+    assert [(r.successes, r.commit, r.tag("steps")) for r in apple] == [(9, "c1", "1000")]
+    assert summary.results["budgets"] == {
+        "select_apple": 1000,
+        "get_coffee": "pending",
+        "texas_holdem": "pending",
+    }
     with pytest.raises(ValueError, match="expected each task and budget once, got select_apple at 1000"):
         ts.read_known([source, source])
 
@@ -127,20 +134,24 @@ def test_rule_takes_the_first_budget_at_the_threshold(counts, budget):
 
 
 def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
-    summary = {
+    settings = {
         "method": "diffusion",
         "budgets": [1000, 3000],
         "threshold": 6,
         "validation_seed": 60000,
         "validation_episodes": 20,
         "train_seed": 1000,
-        "tasks": {
-            "select_apple": {"validation": {"1000": [12, 20]}, "budget": 1000},
-            "texas_holdem": {"validation": {"1000": [1, 20], "3000": [3, 20]}, "budget": None},
-        },
+        "tasks": ["select_apple", "texas_holdem"],
     }
-    source = tmp_path / "summary.json"
-    source.write_text(json.dumps(summary))
+    evaluations = [
+        validation_record("select_apple", 1000, 12),
+        validation_record("texas_holdem", 1000, 1),
+        validation_record("texas_holdem", 3000, 3),
+    ]
+    budgets = {"budgets": {"select_apple": 1000, "texas_holdem": None}}
+    source = write_run_summary(
+        tmp_path / "summary.json", RunSummary(ts.PROTOCOL, settings, evaluations, budgets)
+    )
     assert ts.main(["--out", str(tmp_path / "out"), "--report-only", "--summary", str(source)]) == 0
     report = (tmp_path / "out" / "report.md").read_text()
     assert "| select_apple | 12/20 (38.7-78.1 %) | - | 1000 |" in report
