@@ -25,13 +25,18 @@ import json
 import multiprocessing as mp
 import resource
 import statistics
+import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
+from lerobot_omnid.measure.results import RunSummary, read_run_summary, write_run_summary
+
 CAMERAS = ("cam_b", "cam_c", "cam_d", "cam_e")
+PROTOCOL = "bench_policy"
 STATE_DIM = ACTION_DIM = 10
 
 
@@ -249,10 +254,12 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.report_only:
-        with open(args.report_only) as f:
-            summary = json.load(f)
-        print(f"profile={summary['profile']} device={summary['device']}")
-        print("\n".join(report_lines(summary)))
+        try:
+            summary = read_run_summary(Path(args.report_only), PROTOCOL)
+        except ValueError as e:
+            parser.error(f"--report-only: {e}")
+        print(f"profile={summary.settings['profile']} device={summary.settings['device']}")
+        print("\n".join(report_lines(summary.results["policies"])))
         return
 
     base = PROFILES[args.profile]
@@ -285,17 +292,18 @@ def main() -> None:
             raise SystemExit(f"{name}: measurement process failed with exit code {proc.exitcode}")
         results.append(queue.get())
 
-    summary = {"profile": args.profile, "device": args.device, "repeats": args.repeats, "results": results}
-    print("\n".join(report_lines(summary)))
+    print("\n".join(report_lines(results)))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(summary, f, indent=2)
+        settings = {"profile": args.profile, "device": args.device, "repeats": args.repeats}
+        command = ["python", "benchmarks/bench_policy.py", *sys.argv[1:]]
+        write_run_summary(
+            Path(args.json), RunSummary(PROTOCOL, settings, results={"policies": results}, command=command)
+        )
 
 
-def report_lines(summary: dict) -> list[str]:
+def report_lines(results: list[dict]) -> list[str]:
     """The table of a run (its ``--json`` file): per policy parameters, median training step and
     ``select_action`` time, peak training memory; the ratios of the first policy to the second."""
-    results = summary["results"]
     lines = [f"{'policy':<10} {'params':>9} {'train step':>11} {'select_action':>14} {'train peak mem':>15}"]
     for r in results:
         lines.append(

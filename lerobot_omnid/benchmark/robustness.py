@@ -15,7 +15,7 @@ in one task's ID setting with the same env seeds throughout:
 
 Writes ``<out>/report.md`` (a table per checkpoint: Wilson intervals, share of the rate as trained, Fisher
 tests; a table across checkpoints), ``<out>/robustness_<label>.png`` (success against the perturbation
-beside the controls' bands) and ``<out>/results.json``; ``--report-only --summary FILE`` rebuilds the report
+beside the controls' bands) and ``<out>/summary.json``; ``--report-only --summary FILE`` rebuilds the report
 and charts from such a file alone. Resumable: an evaluation made by the same command
 from the same checkpoint and calibration file is not run again (:mod:`lerobot_omnid.measure.engine`).
 
@@ -69,12 +69,21 @@ from lerobot_omnid.benchmark.robustness_report import (
 )
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.cli import csv_of, int_at_least
+from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done
-from lerobot_omnid.measure.results import read_eval_info
+from lerobot_omnid.measure.results import (
+    SUMMARY,
+    EvalRecord,
+    RunSummary,
+    read_eval_info,
+    tags_of,
+    write_run_summary,
+)
 
 COMPARISON_CHART = "robustness_comparison.png"
 """The checkpoints' curves side by side (written when more than one has results)."""
 SETTINGS_FILE = "robustness.json"
+PROTOCOL = "omnid-robustness"
 """What the finished evaluations of an output folder depend on; a rerun with other values is refused."""
 FIXED = {  # settings field: option
     "task": "--task",
@@ -150,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--summary",
         type=Path,
-        help="with --report-only: rebuild <out>/report.md from this results.json alone (no --checkpoint)",
+        help="with --report-only: rebuild <out>/report.md from this summary.json alone (no --checkpoint)",
     )
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser
@@ -265,14 +274,24 @@ def write_outputs(
     commit: str | None,
     command: str,
 ) -> dict[str, list]:
-    """results.json, report.md and the charts from the ``runs`` done; returns the rows per checkpoint
-    label."""
+    """summary.json, report.md and the charts from the ``runs`` done; returns the rows per checkpoint
+    label. Every evaluation is a record (model: the checkpoint's label; setting: its cell's folder name,
+    tags: condition, level, draw, camera); ``results`` holds each checkpoint's table rows, which the report
+    is built from."""
     done = {run.output for run in runs if is_done(run)}
-    rows = {c.label: table_rows(cell_counts(c, settings, out, done)) for c in checkpoints}
+    rows, evaluations = {}, []
+    for c in checkpoints:
+        counts = cell_counts(c, settings, out, done)
+        rows[c.label] = table_rows(counts)
+        for cell, by_seed in counts.items():
+            tags = tags_of(dataclasses.asdict(cell))
+            for k, (successes, episodes) in by_seed.items():
+                source = str(eval_dir(out, c, cell, k).relative_to(out))
+                record = EvalRecord(
+                    (c.label, settings.task, cell.name), "", None, k, successes, episodes, source
+                )
+                evaluations.append(dataclasses.replace(record, tags=tags))
     results = {
-        "settings": dataclasses.asdict(settings),
-        "commit": commit,
-        "command": command,
         "checkpoints": {
             c.label: {
                 "path": str(c.path),
@@ -282,19 +301,21 @@ def write_outputs(
             for c in checkpoints
         },
     }
-    (out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    write_report(results, rows, out)
+    summary = RunSummary(PROTOCOL, dataclasses.asdict(settings), evaluations, results, commit, [command])
+    write_run_summary(out / SUMMARY, summary)
+    write_report(summary, rows, out)
     return rows
 
 
-def write_report(results: Mapping[str, Any], rows: Mapping[str, Sequence[Row]], out: Path) -> None:
-    """``<out>/report.md`` and its charts from a ``results.json`` (this run's or a committed one) and its
-    rows per checkpoint label."""
-    settings = results["settings"]
+def write_report(summary: RunSummary, rows: Mapping[str, Sequence[Row]], out: Path) -> None:
+    """``<out>/report.md`` and its charts from a run summary (this run's or a committed one) and its rows
+    per checkpoint label."""
+    settings = summary.settings
+    command = " ".join(summary.command)
     lines = [
         "# Robustness: calibration error, bumped cameras, dead cameras",
         "",
-        f"Command: `{results['command']}`; code commit {results['commit']}. Perturbation level L: every "
+        f"Command: `{command}`; code commit {summary.commit}. Perturbation level L: every "
         "camera moved by L cm in a random direction and turned by L degrees about a random axis (seeded "
         f"draws per level: {settings['draws']}, perturbation seed {settings['perturbation_seed']}; level 0 "
         "is the checkpoint as trained). "
@@ -318,7 +339,7 @@ def write_report(results: Mapping[str, Any], rows: Mapping[str, Sequence[Row]], 
     if len(evaluated) > 1:
         chart = comparison_chart(evaluated, out / COMPARISON_CHART)
         lines += [f"![the checkpoints side by side]({chart.name})", ""]
-    for label, checkpoint in results["checkpoints"].items():
+    for label, checkpoint in summary.results["checkpoints"].items():
         chart = None
         if rows[label]:
             chart = robustness_chart(label, rows[label], out / f"robustness_{label}.png")
@@ -327,12 +348,11 @@ def write_report(results: Mapping[str, Any], rows: Mapping[str, Sequence[Row]], 
     (out / "report.md").write_text("\n".join(lines))
 
 
-def report_from_results(path: Path, out: Path) -> None:
-    """Rebuild ``<out>/report.md`` and its charts from a committed ``results.json`` alone."""
-    results = json.loads(path.read_text())
-    rows = {label: rows_from_json(c["rows"]) for label, c in results["checkpoints"].items()}
-    write_report(results, rows, out)
-    print(f"report: {out / 'report.md'} (from {path})")
+def report_from_summary(summary: RunSummary, path: Path) -> None:
+    """Rebuild ``path`` (a ``report.md``) and its charts from a committed run summary alone."""
+    rows = {label: rows_from_json(c["rows"]) for label, c in summary.results["checkpoints"].items()}
+    write_report(summary, rows, path.parent)
+    print(f"report: {path}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -340,10 +360,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.dry_run and args.report_only:
         parser.error("--dry-run and --report-only: expected at most one of them, got both")
-    if args.summary:
-        if not args.report_only:
-            parser.error("--summary: expected with --report-only, got it without")
-        report_from_results(args.summary, args.out.resolve())
+    if engine.report_from_summary(parser, args, args.out.resolve(), PROTOCOL, report_from_summary):
         return 0
     if not args.checkpoint:
         parser.error("--checkpoint: expected at least one [LABEL=]PATH, got none")

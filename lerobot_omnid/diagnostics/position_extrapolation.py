@@ -24,15 +24,16 @@ scrambles the object's position as much as a new layout would.
 
 Records (once) 10 expert episodes per setting from env seed 400000, disjoint from every other seed set
 of the benchmark (docs/benchmark.md#seeds), with the checkpoints' cameras and image size. Writes
-``<out>/results.json`` and ``<out>/report.md``; ``--report-only RESULTS...`` rebuilds the report from such
-files alone (several runs' side by side).
+``<out>/summary.json`` (the run summary every protocol writes; the probe's errors under ``results``) and
+``<out>/report.md``; ``--report-only SUMMARY...`` rebuilds the report from such files alone (several runs'
+side by side).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import subprocess
+import sys
 from pathlib import Path
 
 import torch
@@ -47,9 +48,12 @@ from lerobot_omnid.benchmark.plan import TASK0
 from lerobot_omnid.diagnostics.offline_eval import GRIPPER, POSITION, load_policy
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX
 from lerobot_omnid.measure.report import write_markdown
+from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
 
 FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest): the object is unmoved
 PROBE_SEED = 400_000  # first env seed of the probe's recordings
+PROTOCOL = "position_extrapolation"
+MODULE = "lerobot_omnid.diagnostics.position_extrapolation"
 RIDGE_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)  # per sample, on standardised features
 BATCH = 32
 VALIDATION = "validation (id)"  # the fresh in-distribution set that chooses the ridge weight
@@ -190,14 +194,18 @@ def main(argv: list[str] | None = None) -> int:
         "--report-only",
         nargs="+",
         type=Path,
-        metavar="RESULTS",
-        help="probe nothing: merge these results.json files (committed summaries) into <out>/report.md",
+        metavar="SUMMARY",
+        help="probe nothing: merge these summary.json files (committed summaries) into <out>/report.md",
     )
     args = parser.parse_args(argv)
     if args.report_only:
         merged: dict[str, dict] = {}
         for path in args.report_only:
-            for name, result in json.loads(path.read_text()).items():
+            try:
+                models = read_run_summary(path, PROTOCOL).results["models"]
+            except ValueError as e:
+                parser.error(f"--report-only: {e}")
+            for name, result in models.items():
                 if name in merged:
                     parser.error(f"--report-only: expected each model once, got {name!r} again in {path}")
                 merged[name] = result
@@ -237,14 +245,17 @@ def main(argv: list[str] | None = None) -> int:
         for t in tables:
             results[name]["sets"][t]["table_shift"] = table_shift(train[0], validation[0], sets[t][0])
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    settings = {"probe_seed": PROBE_SEED, "episodes": args.episodes, "tables": tables}
+    command = ["python", "-m", MODULE, *(sys.argv[1:] if argv is None else argv)]
+    summary = RunSummary(PROTOCOL, settings, results={"models": results}, command=command)
+    write_run_summary(args.out / SUMMARY, summary)
     write_report(results, args.out / "report.md")
     return 0
 
 
 def write_report(results: dict[str, dict], path: Path) -> None:
-    """The probe's tables (error per set and model; with tables, each table's shift) from ``results.json``
-    contents, one run's or several merged, written to ``path`` and printed."""
+    """The probe's tables (error per set and model; with tables, each table's shift) from the models' probe
+    results of one run summary or several merged, written to ``path`` and printed."""
     names = list(results)
     lines = ["| set | " + " | ".join(f"{n} probe (cm)" for n in names) + " | training mean (cm) |"]
     lines.append("| --- |" + " --- |" * (len(names) + 1))

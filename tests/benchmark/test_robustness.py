@@ -329,15 +329,17 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, calibrations, caps
     assert (out / robustness.COMPARISON_CHART).stat().st_size > 10_000
     assert f"]({robustness.COMPARISON_CHART})" in report
     assert "| Condition | Perturbation | omnid - diffusion |" in report and "Robustness targets" in report
-    results = json.loads((out / "results.json").read_text())
-    nominal = results["checkpoints"]["omnid"]["rows"][0]
+    summary = json.loads((out / "summary.json").read_text())
+    nominal = summary["results"]["checkpoints"]["omnid"]["rows"][0]
     assert nominal["condition"] == "nominal" and nominal["successes"] == 4
+    records = [e for e in summary["evaluations"] if e["model"] == "omnid" and e["setting"] == "nominal"]
+    assert [(e["eval_seed"], e["successes"], e["tags"]["condition"]) for e in records] == [(1, 4, "nominal")]
     stamp = json.loads((out / "stamps" / "omnid" / "nominal" / "seed1.json").read_text())
     assert "lerobot-eval" in stamp["command"] and len(stamp["fingerprint"]) == 16
     assert len(list((out / "calibration" / "omnid").rglob("*.json"))) == 2 * 2 + 2
-    # Its results.json alone rebuilds the same report, with no checkpoint and no run folder.
+    # Its summary.json alone rebuilds the same report, with no checkpoint and no run folder.
     rebuilt = tmp_path / "rebuilt"
-    argv_summary = ["--out", str(rebuilt), "--report-only", "--summary", str(out / "results.json")]
+    argv_summary = ["--out", str(rebuilt), "--report-only", "--summary", str(out / "summary.json")]
     assert robustness.main(argv_summary) == 0
     assert (rebuilt / "report.md").read_text() == report
     assert (rebuilt / robustness.COMPARISON_CHART).is_file() and not (rebuilt / "stamps").exists()
@@ -375,7 +377,7 @@ def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations,
         (["--conditions", "calibration,nope"], "--conditions: expected comma-separated distinct values"),
         (["--dry-run", "--report-only"], "expected at most one of them"),
         (["DUP"], "expected a distinct label"),
-        (["--summary", "results.json"], "--summary: expected with --report-only"),
+        (["--summary", "summary.json"], "--summary: expected with --report-only"),
         (["NONE", "--out", "o"], "--checkpoint: expected at least one [LABEL=]PATH, got none"),
     ],
 )
@@ -406,7 +408,7 @@ def test_checkpoint_config_errors_name_the_field(tmp_path, calibrations):
 
 
 def test_report_only_rebuilds_the_committed_table_from_its_summary_alone(tmp_path, capsys):
-    """The committed results.json of the three-checkpoint sweep rebuilds the table docs/results.md quotes."""
+    """The committed summary of the three-checkpoint sweep rebuilds the table docs/results.md quotes."""
     summary = COMMITTED_SUMMARIES / "robustness_mini_three_cpu2.json"
     assert robustness.main(["--out", str(tmp_path), "--report-only", "--summary", str(summary)]) == 0
     report = (tmp_path / "report.md").read_text()

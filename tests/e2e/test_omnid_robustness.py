@@ -65,7 +65,7 @@ def test_real_tools_end_to_end_tiny(record_train_robustness):
     proc = ran["robustness"]
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "6 evaluations: 6 ran" in proc.stdout
-    rows = json.loads((out / "results.json").read_text())["checkpoints"]["tiny"]["rows"]
+    rows = json.loads((out / "summary.json").read_text())["results"]["checkpoints"]["tiny"]["rows"]
     assert [r["condition"] for r in rows] == [
         "nominal",
         "calibration",

@@ -4,6 +4,7 @@ another format or another protocol refused with the field, what was expected and
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -50,3 +51,26 @@ def test_other_formats_and_protocols_are_refused(tmp_path):
         read_run_summary(path, "a_protocol")
     with pytest.raises(ValueError, match="expected a run summary of a_protocol"):
         read_run_summary(tmp_path / "missing.json", "a_protocol")
+
+
+COMMITTED = Path(__file__).resolve().parents[2] / "docs" / "results"
+WRITERS = {
+    "omnid-benchmark": "lerobot_omnid.benchmark.benchmark",
+    "omnid-demo": "lerobot_omnid.benchmark.demo",
+    "omnid-robustness": "lerobot_omnid.benchmark.robustness",
+    "task_sizing": "lerobot_omnid.benchmark.task_sizing",
+    "rigs_and_wrist": "lerobot_omnid.benchmark.rigs_and_wrist",
+    "readout_selection": "lerobot_omnid.benchmark.readout_selection",
+    "position_extrapolation": "lerobot_omnid.diagnostics.position_extrapolation",
+    "bench_policy": "benchmarks/bench_policy.py",
+    "fuse_last_step_only_validation": "the validation of --policy.fuse_last_step_only (docs/benchmark.md)",
+}
+"""The protocol of each committed summary and what wrote it."""
+
+
+@pytest.mark.parametrize("path", sorted(COMMITTED.glob("*.json")), ids=lambda p: p.name)
+def test_every_committed_summary_is_in_the_one_format(path):
+    protocol = json.loads(path.read_text()).get("protocol")
+    assert protocol in WRITERS, f"{path.name}: protocol {protocol!r} is not one of {sorted(WRITERS)}"
+    summary = read_run_summary(path, protocol)
+    assert summary.evaluations or summary.results, f"{path.name}: neither evaluations nor results"
