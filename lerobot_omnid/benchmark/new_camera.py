@@ -178,7 +178,7 @@ def finetune(out: Path, hypothesis: str) -> list[str]:
     if recipe.lr is not None:
         flags.append(f"--policy.optimizer_lr={recipe.lr:g}")
     if recipe.frozen:
-        flags.append(f"--policy.frozen_modules=[{','.join(recipe.frozen)}]")
+        flags.append("--policy.frozen_modules=" + commands.json_list(recipe.frozen))
     return commands.train_command(
         out / "data" / (REPLAY_DATA if recipe.replay else FEWSHOT_DATA),
         finetuned_dir(out, hypothesis),

@@ -2,11 +2,12 @@
 LeRobot options, with their reasons, come from :mod:`lerobot_omnid.benchmark.methods`).
 
 Pure: builds command lines and paths from a profile, runs nothing. The protocol (docs/benchmark.md, section 4
-of the paper): cameras B-E for training; every task's ID success; on task 0 position OOD, the graded position
-bands and four background OODs, and each method's controls (the same checkpoint blind; OmniD with its
-cameras' calibrations permuted or perturbed); the task-0 model fine-tuned with camera-A episodes of
-task 0 and of task 1; OmniD ablations; each fine-tuned model's blind control. Everything after the
-recordings is repeated per training seed.
+of the paper): cameras B-E for training; every task's ID success; on task 0 (on every task with
+``every_task``) the profile's settings (position OOD, the graded position bands, background OODs) and each
+method's controls (the same checkpoint blind; OmniD with its cameras' calibrations permuted or perturbed);
+the task-0 model fine-tuned with camera-A episodes of task 0 and of task 1; OmniD ablations; each fine-tuned
+model's blind control; with ``multitask``, one model per method trained on every task together. Everything
+after the recordings is repeated per training seed.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.measure.engine import Run, plan
 
 MULTITASK_METHODS = ("omnid", "diffusion")
+MULTITASK_DATASET = "all_tasks_bcde_onehot"
 MULTITASK = "_multitask"
 """Suffix of a method's model trained on every task together, told the task by a one-hot in
 ``observation.environment_state`` (``omnid-record --task-onehot``, ``--env.task_onehot=true``)."""
@@ -90,8 +92,8 @@ class BenchmarkProfile:
     heldout_episodes: int  # held-out expert episodes per task-0 setting for the open-loop action error
     eval_seeds: tuple[int, ...]
     episode_length: int  # time limit of an evaluation episode, env steps (10 per second)
-    settings: tuple[str, ...]  # evaluation settings of task 0; other tasks are evaluated ID
-    control_settings: tuple[str, ...]  # task-0 settings in which the controls are evaluated too
+    settings: tuple[str, ...]  # evaluation settings of task 0 (every task with every_task); others: ID
+    control_settings: tuple[str, ...]  # of those settings, the ones in which the controls are evaluated
     train_seeds: tuple[int, ...]  # lerobot-train --seed of each repetition of the training runs
     fewshot: bool
     ablations: bool
@@ -259,12 +261,11 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     return plan(runs, out)
 
 
-MULTITASK_DATASET = "all_tasks_bcde_onehot"
-
-
 def multitask(p: BenchmarkProfile, tasks: Sequence[str]) -> bool:
-    """Whether the plan has the multi-task models: asked for, and more than one task."""
-    return p.multitask and len(tasks) > 1
+    """Whether the plan has the multi-task models: asked for, with every task of the benchmark planned (a
+    model of some tasks only would be another model under the same name) and a method that has one."""
+    together = set(tasks) == set(available_tasks()) and len(tasks) > 1
+    return p.multitask and together and any(m in p.methods for m in MULTITASK_METHODS)
 
 
 def multitask_steps(p: BenchmarkProfile, tasks: Sequence[str]) -> int:
@@ -407,7 +408,7 @@ def plan_models(
         steps = multitask_steps(p, tasks)
         sized = dataclasses.replace(p, steps=steps)
         onehot = ("--env.task_onehot=true",)
-        for method in MULTITASK_METHODS:
+        for method in (m for m in MULTITASK_METHODS if m in p.methods):
             flags = [*common(method), *(f for f, _ in method_flags(method, sized))]
             trained = train("train_multitask", method, "all_tasks", MULTITASK_DATASET, flags, steps)
             key = method + MULTITASK

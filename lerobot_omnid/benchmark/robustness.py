@@ -83,8 +83,8 @@ from lerobot_omnid.measure.results import (
 COMPARISON_CHART = "robustness_comparison.png"
 """The checkpoints' curves side by side (written when more than one has results)."""
 SETTINGS_FILE = "robustness.json"
-PROTOCOL = "omnid-robustness"
 """What the finished evaluations of an output folder depend on; a rerun with other values is refused."""
+PROTOCOL = "omnid-robustness"
 FIXED = {  # settings field: option
     "task": "--task",
     "episodes": "--eval-episodes",

@@ -27,9 +27,20 @@ SUMMARY = "summary.json"
 """A protocol folder's run summary (:func:`write_run_summary`)."""
 SUMMARY_FORMAT = 2
 BENCHMARK = "omnid-benchmark"
-COMPARABLE = ("episodes", "image_size", "steps", "batch_size", "episode_length", "finetune_steps", "small")
-"""Profile fields that must agree between folders whose results are combined: the models are the same
-experiment; methods, tasks, settings, training and eval seeds and episodes per evaluation may differ."""
+COMPARABLE = {
+    "episodes": None,
+    "image_size": None,
+    "steps": None,
+    "batch_size": None,
+    "episode_length": None,
+    "finetune_steps": None,
+    "small": None,
+    "fuse_last_step_only": False,
+    "task_steps": [],
+}
+"""Profile fields that must agree between folders whose results are combined (the models are the same
+experiment; methods, tasks, settings, training and eval seeds and episodes per evaluation may differ), each
+with the value a summary written before the field existed means."""
 
 
 @dataclass(frozen=True)
@@ -259,11 +270,13 @@ def read_summary(path: Path) -> tuple[dict[str, Any], list[EvalRecord]]:
 
 def check_comparable(profile: Mapping[str, Any], other: Mapping[str, Any], source: str) -> None:
     """Raise ValueError naming the field if ``other`` (from ``source``) is not the same experiment."""
-    for name in COMPARABLE:
-        if profile.get(name) != other.get(name):
+    for name, default in COMPARABLE.items():
+        # As JSON reads them back: a profile's tuples are a summary's lists.
+        mine, theirs = (json.loads(json.dumps(p.get(name, default))) for p in (profile, other))
+        if mine != theirs:
             raise ValueError(
-                f"{source}: {name}: expected {profile.get(name)!r} as in this benchmark's profile, got "
-                f"{other.get(name)!r} (results of different experiments are not combined)"
+                f"{source}: {name}: expected {mine!r} as in this benchmark's profile, got {theirs!r} "
+                "(results of different experiments are not combined)"
             )
 
 

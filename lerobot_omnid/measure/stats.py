@@ -130,7 +130,8 @@ def mantel_haenszel(strata: list[Counts]) -> float:
         variance += n1 * n2 * successes * (total - successes) / (total * total * (total - 1))
     if variance == 0:
         return 1.0
-    return chi2_sf(max(0.0, abs(deviation) - 0.5) ** 2 / variance, 1)
+    correction = 0.5 if abs(deviation) >= 0.5 else 0.0  # R's rule: no correction below half a success
+    return chi2_sf((abs(deviation) - correction) ** 2 / variance, 1)
 
 
 @dataclass(frozen=True)

@@ -359,6 +359,11 @@ class OmniDConfig(PreTrainedConfig):
                         f"augments the images and calibrations the OFG fuses, and the 'w/o OFG' ablation "
                         f"has no OFG, so it would have no effect"
                     )
+        if isinstance(self.frozen_modules, str):
+            raise ValueError(
+                f"`frozen_modules`: expected a list of {list(FREEZABLE)} (on the command line as JSON, "
+                f"'[\"head\"]'), got the string {self.frozen_modules!r}"
+            )
         self.frozen_modules = tuple(self.frozen_modules)
         unknown = [m for m in self.frozen_modules if m not in FREEZABLE]
         if unknown or len(set(self.frozen_modules)) == len(FREEZABLE):

@@ -14,6 +14,7 @@ import pytest
 from omnid_testing import by_name, flag
 
 import lerobot_omnid.benchmark.benchmark as bench
+from lerobot_omnid.benchmark import plan as plan_module
 from lerobot_omnid.benchmark.methods import ABLATIONS
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, TASK1, TRAIN_SEED, build_plan
 from lerobot_omnid.measure import engine
@@ -354,9 +355,10 @@ def test_gpu8_profile_compares_both_methods_in_three_settings(monkeypatch, tmp_p
 
 
 def test_six_tasks_profile_reports_every_task_with_controls_and_ranges(monkeypatch, tmp_path):
-    """The six-task profile on two tasks with the tools stood in: every method trained and evaluated on
-    both, the report's every-task table with its ranges and controls (a method no better than its blind
-    control marked) and OmniD against each method pooled over the tasks."""
+    """The six-task profile on a benchmark of two tasks with the tools stood in: every method trained and
+    evaluated on both, the report's every-task table with its ranges and controls (a method no better than
+    its blind control marked) and OmniD against each method pooled over the tasks."""
+    monkeypatch.setattr(plan_module, "available_tasks", lambda: ("add_condiment", "get_coffee"))
     calls: list[str] = []
     rates = {"omnid": 60.0, "omnid/blind": 0.0, "diffusion": 20.0, "diffusion/blind": 20.0}
     monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates))

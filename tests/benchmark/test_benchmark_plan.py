@@ -13,6 +13,7 @@ import gym_omnid.constants
 import pytest
 from omnid_testing import by_name, flag
 
+from lerobot_omnid.benchmark import plan as plan_module
 from lerobot_omnid.benchmark import task_sizing
 from lerobot_omnid.benchmark.methods import METHODS
 from lerobot_omnid.benchmark.plan import (
@@ -332,12 +333,13 @@ def test_six_tasks_profile_reuses_the_sizing_runs_and_controls_every_task(tmp_pa
     assert "--policy.fuse_last_step_only=true" in runs["train/omnid/add_condiment"].cmd
 
 
-def test_six_tasks_profile_trains_one_model_for_every_task(tmp_path):
+def test_six_tasks_profile_trains_one_model_for_every_task(tmp_path, monkeypatch):
     """OmniD and DP also trained on the tasks' episodes recorded again with the task one-hot and merged,
     for the single-task models' steps together, evaluated on every task with the one-hot beside their blind
-    controls; the single-task runs are those of the plan without them."""
+    controls; the single-task runs are those of the plan without them. (Here the benchmark has two tasks.)"""
     p = dataclasses.replace(PROFILES["six-tasks"], task_steps=(("get_coffee", 3000),))
     tasks = ("add_condiment", "get_coffee")
+    monkeypatch.setattr(plan_module, "available_tasks", lambda: tasks)
     runs = by_name(build_plan(p, tmp_path, tasks))
     alone = by_name(build_plan(dataclasses.replace(p, multitask=False), tmp_path, tasks))
     assert {n: r.fingerprint for n, r in alone.items()} == {n: runs[n].fingerprint for n in alone}
@@ -361,5 +363,8 @@ def test_six_tasks_profile_trains_one_model_for_every_task(tmp_path):
                     assert run.result == (f"{method}_multitask", task, "id")
                     assert "--env.task_onehot=true" in run.cmd and run.needs[0] == trained.name
     assert not any(n.startswith("train_multitask/act") for n in runs)
-    solo = build_plan(dataclasses.replace(p, multitask=True), tmp_path, ("add_condiment",))
-    assert not any("multitask" in r.name for r in solo)  # one task: nothing to train together
+    no_dp = by_name(build_plan(dataclasses.replace(p, methods=("omnid", "act")), tmp_path, tasks))
+    assert [n for n in no_dp if n.startswith("train_multitask/")] == ["train_multitask/omnid/all_tasks"]
+    # Some tasks of the benchmark only: no model of all tasks (it would be another model under its name).
+    monkeypatch.setattr(plan_module, "available_tasks", lambda: (*tasks, "texas_holdem"))
+    assert not any("multitask" in r.name for r in build_plan(p, tmp_path, tasks))

@@ -57,7 +57,7 @@ def test_hypotheses_differ_only_where_they_say(tmp_path):
     assert single_long["--policy.path"].startswith(str(tmp_path / "train_single_camera"))
     frozen = runs["finetune_validation/long_frozen_head"]
     assert set(frozen.items()) - set(long.items()) == {
-        ("--policy.frozen_modules", "[head]"),
+        ("--policy.frozen_modules", '["head"]'),
         ("--output_dir", str(tmp_path / "finetune_validation" / "long_frozen_head")),
     }
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
+
+import lerobot_omnid.benchmark.benchmark as bench
+from lerobot_omnid.benchmark import plan as plan_module
 
 TASKS = ("select_apple", "add_condiment")
 TINY = "--episodes 1 --steps 2 --batch-size 2 --num-workers 0 --eval-episodes 1 --eval-seeds 1 "
@@ -19,15 +19,16 @@ TINY += "--episode-length 10 --settings id --methods omnid,diffusion"
 
 
 @pytest.mark.slow
-def test_one_model_for_every_task_trains_on_the_merged_set_and_is_told_the_task(tmp_path):
+def test_one_model_for_every_task_trains_on_the_merged_set_and_is_told_the_task(tmp_path, monkeypatch):
+    """``omnid-benchmark`` in this process (so that the benchmark can be made of two tasks), running the real
+    tools as subprocesses."""
+    monkeypatch.setattr(plan_module, "available_tasks", lambda: TASKS)
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
     out = tmp_path / "bench"
     sizing = tmp_path / "sizing.json"
     sizing.write_text(json.dumps({task: 2 for task in TASKS}))
-    argv = [str(Path(sys.executable).parent / "omnid-benchmark"), "--profile", "six-tasks", "--out", str(out)]
-    argv += ["--tasks", ",".join(TASKS), "--task-steps", str(sizing), *TINY.split()]
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=1200, env=env)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    argv = ["--profile", "six-tasks", "--out", str(out), "--task-steps", str(sizing), *TINY.split()]
+    assert bench.main([*argv, "--tasks", ",".join(TASKS)]) == 0
     info = json.loads((out / "data" / "all_tasks_bcde_onehot" / "meta" / "info.json").read_text())
     assert info["total_episodes"] == 2 and info["features"]["observation.environment_state"]["shape"] == [6]
     for method in ("omnid", "diffusion"):

@@ -12,6 +12,7 @@ from lerobot_omnid.measure.results import (
     SUMMARY_FORMAT,
     EvalRecord,
     RunSummary,
+    check_comparable,
     read_run_summary,
     tags_of,
     write_run_summary,
@@ -74,3 +75,16 @@ def test_every_committed_summary_is_in_the_one_format(path):
     assert protocol in WRITERS, f"{path.name}: protocol {protocol!r} is not one of {sorted(WRITERS)}"
     summary = read_run_summary(path, protocol)
     assert summary.evaluations or summary.results, f"{path.name}: neither evaluations nor results"
+
+
+def test_folders_of_other_training_lengths_or_encodings_are_not_combined():
+    """Per-task steps and OmniD's last-step-only encoding decide the models too; a summary's JSON lists
+    equal the profile's tuples, and a summary written before a field existed means its default."""
+    profile = {"steps": 1000, "task_steps": (("get_coffee", 3000),), "fuse_last_step_only": True}
+    check_comparable(
+        profile, {"steps": 1000, "task_steps": [["get_coffee", 3000]], "fuse_last_step_only": True}, "s"
+    )
+    with pytest.raises(ValueError, match=r"s: task_steps: expected \[\['get_coffee', 3000\]\] .*got \[\]"):
+        check_comparable(profile, {"steps": 1000, "fuse_last_step_only": True}, "s")
+    with pytest.raises(ValueError, match=r"s: fuse_last_step_only: expected True .*got False"):
+        check_comparable(profile, {"steps": 1000, "task_steps": [["get_coffee", 3000]]}, "s")

@@ -7,6 +7,7 @@ import pytest
 import torch
 from omnid_testing import random_batch, tiny_config
 
+from lerobot_omnid.benchmark.commands import json_list
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
@@ -71,3 +72,13 @@ def test_frozen_modules_survive_save_and_load(tmp_path):
     loaded = OmniDPolicy.from_pretrained(tmp_path, config=config)
     assert not any(p.requires_grad for p in loaded.model.unet.parameters())
     assert all(p.requires_grad for p in loaded.model.backbone.parameters())
+
+
+def test_the_command_line_form_parses_when_fine_tuning(tmp_path):
+    """``--policy.frozen_modules`` as the protocols write it (JSON) parses over a saved checkpoint's config,
+    as ``lerobot-train --policy.path=...`` does; a plain string is refused with the JSON form."""
+    small_policy().config.save_pretrained(tmp_path)
+    config = OmniDConfig.from_pretrained(tmp_path, cli_overrides=["--frozen_modules=" + json_list(("head",))])
+    assert config.frozen_modules == ("head",)
+    with pytest.raises(ValueError, match=r"expected a list of .*as JSON"):
+        tiny_config(CAMS, size=SIZE, frozen_modules="head")
