@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     command = ["omnid-benchmark", *(sys.argv[1:] if argv is None else argv)]
     runs = build_plan(p, out, tasks)
     print("\n".join(settings_markdown(p, tasks)))
-    kinds = ("record", "prepare", "train", "calibration", "eval", "offline")
+    kinds = ("record", "merge", "prepare", "train", "calibration", "eval", "offline")
     kinds = {k: sum(r.kind == k for r in runs) for k in kinds}
     per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
     todo = sum(not is_done(r) for r in runs)

@@ -224,14 +224,14 @@ def plan_runs(
     profile: Profile, out: Path, device: str = "cpu", episode_length: int | None = None
 ) -> list[Run]:
     """The main job as runs: record, train, the blind control's calibration, the evaluations."""
-    dataset = out / "data" / "select_apple_bcde"
+    dataset = out / "data" / f"{TASK}_bcde"
     train_dir = out / "train"
     checkpoint = train_dir / CHECKPOINT
     env_flags = (f"--env.episode_length={episode_length}",) if episode_length else ()
     blind_file = out / "controls" / "blind.json"
     blind_flags = tuple(f for f, _ in control_flags("omnid", "blind", TRAIN_CAMERAS, blind_file))
-    record = record_command("select_apple", profile.episodes, TRAIN_CAMERAS, profile.image_size, dataset)
-    train = train_command(dataset, train_dir, profile, device, "select_apple", TRAIN_CAMERAS, env_flags)
+    record = record_command(TASK, profile.episodes, TRAIN_CAMERAS, profile.image_size, dataset)
+    train = train_command(dataset, train_dir, profile, device, TASK, TRAIN_CAMERAS, env_flags)
     runs = [
         Run("record", "record", tuple(record), dataset),
         Run("train", "train", tuple(train), train_dir, ("record",)),
@@ -249,7 +249,7 @@ def plan_runs(
         cmd = eval_command(
             checkpoint,
             out / f"eval_{name}",
-            "select_apple",
+            TASK,
             layout,
             TRAIN_CAMERAS,
             profile.image_size,

@@ -20,10 +20,10 @@ The protocol (docs/benchmark.md#a-new-camera-its-protocol), fixed before any of 
 5. *Rule* (:func:`select`): the most validation successes; among those within ``TIE_MARGIN`` of the
    most, the fewest fine-tuning steps, then the order of ``HYPOTHESES`` (the paper's first).
 6. *Test*, once selected, on ``select_apple`` and ``select_chemistry_tube`` with two training seeds: the
-   selected recipe and the paper's, OmniD and DP (DP: the same steps and learning rate; the single-camera
-   option is OmniD's own), 30 episodes per cell on two disjoint env-seed ranges, blind controls, the probe
-   error beside each model. This module plans the validation; the test phase is planned from its
-   selection.
+   selected recipe and the paper's, OmniD and DP (DP: the same steps and learning rate, every weight
+   trained, camera A alone: single-camera pre-training, frozen parts and replay are OmniD's own), 30
+   episodes per cell on two disjoint env-seed ranges, blind controls, the probe error beside each model.
+   This module plans the validation; the test phase is not planned yet.
 
 Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``,
 ``<out>/summary.json`` and, once every hypothesis is validated, ``<out>/selection.json``.

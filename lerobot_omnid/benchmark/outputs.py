@@ -119,7 +119,7 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
     if p.control_settings:
         for m in p.methods:
             cameras = VQBET_CAMERA if m == "vqbet" else TRAIN_CAMERAS
-            for control in method_controls(m):
+            for control in (c for c in method_controls(m) if c in p.controls):
                 flags = control_flags(m, control, cameras, "<control calibration file>")
                 rows += [(f"{LABELS[m]} {CONTROL_LABELS[control]}", f, why) for f, why in flags]
     if p.ablations:
@@ -205,7 +205,9 @@ def every_task_lines(
         "to OmniD with Newcombe's interval and the two-sided Fisher p (pooled rows: Mantel-Haenszel, "
         "stratified by task).",
         "",
-        *across_tasks.task_table(records, methods, tasks, LABELS, setting="id", unseen=unseen),
+        *across_tasks.task_table(
+            records, methods, tasks, LABELS, setting="id", unseen=unseen, controls=p.controls
+        ),
     ]
     if "omnid" in methods and len(methods) > 1 and len(tasks) > 1:
         lines += ["", "## OmniD against each method over the tasks", ""]
@@ -221,7 +223,7 @@ def every_task_lines(
             "models' together), told the task by a one-hot in `observation.environment_state`; ID per task "
             "beside its blind control, then against the single-task models over the tasks.",
             "",
-            *across_tasks.task_table(records, models, tasks, LABELS, controls=("blind",)),
+            *across_tasks.task_table(records, models, tasks, LABELS, base=None, controls=("blind",)),
         ]
         for m in together:
             lines += ["", *across_tasks.pooled_comparison(records, (m,), tasks, LABELS, base=m + MULTITASK)]

@@ -288,7 +288,7 @@ def write_outputs(
             for k, (successes, episodes) in by_seed.items():
                 source = str(eval_dir(out, c, cell, k).relative_to(out))
                 record = EvalRecord(
-                    (c.label, settings.task, cell.name), "", None, k, successes, episodes, source
+                    (c.label, settings.task, cell.name), "", c.train_seed, k, successes, episodes, source
                 )
                 evaluations.append(dataclasses.replace(record, tags=tags))
     results = {

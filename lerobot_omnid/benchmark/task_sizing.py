@@ -206,6 +206,10 @@ def read_known(paths: Sequence[Path]) -> Known:
     known: Known = {}
     for path in paths:
         for record in read_run_summary(path, PROTOCOL).evaluations:
+            if record.tag("steps") is None:
+                raise ValueError(
+                    f"--also: expected every evaluation tagged with its steps, got none in {path}"
+                )
             task, steps = record.key[1], int(record.tag("steps"))
             if steps in known.setdefault(task, {}):
                 raise ValueError(

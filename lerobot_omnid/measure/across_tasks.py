@@ -5,7 +5,12 @@ per-task heterogeneity.
 Pure functions of evaluation records (:class:`lerobot_omnid.measure.results.EvalRecord`). A *range* is
 one eval seed: ``lerobot-eval --seed=1000k`` runs consecutive env seeds, one draw of layouts; a claim is
 reported as holding in every range only if it does in each on its own. A cell counts as *above its blind
-control* when its rate is higher and a two-sided Fisher test puts the difference at p < 0.05.
+control* when its rate is higher and a two-sided test puts the difference at p < 0.05 (Fisher's for one
+task, Mantel-Haenszel's stratified by task for several).
+
+Pooled over tasks, a difference is that of the summed counts: with the same episodes per task and method
+(the benchmark's design) it is the mean of the per-task differences, which is also the Mantel-Haenszel
+estimate of the common difference; its p-value is the Mantel-Haenszel test's, stratified by task.
 """
 
 from __future__ import annotations
@@ -56,15 +61,37 @@ def _strata(
     return strata
 
 
+def _paired(
+    cells: Mapping[Key, CellResult],
+    controlled: Mapping[Key, CellResult],
+    method: str,
+    task: str,
+    setting: str,
+) -> list[tuple[int, int, int, int]]:
+    """``[(successes, episodes, control's successes, control's episodes)]`` of ``method`` on ``task`` in
+    ``setting``, or ``[]`` where either is missing."""
+    a, b = cells.get((method, task, setting)), controlled.get((method, task, setting))
+    return [(a.successes, a.episodes, b.successes, b.episodes)] if a and b else []
+
+
 def _rate_or_missing(cell: CellResult | None) -> str:
     return MISSING if cell is None else format_rate(cell)
 
 
-def _marked(cell: CellResult | None, blind: CellResult | None) -> str:
-    """The rate, marked :data:`NOT_ABOVE_BLIND` where its blind control is there and not beaten."""
+def _marked(cell: CellResult | None, blind: list[tuple[int, int, int, int]]) -> str:
+    """The rate, marked :data:`NOT_ABOVE_BLIND` where its blind control is there and not beaten: ``blind``
+    holds per task the cell's counts and its control's (successes, episodes, successes, episodes)."""
     if cell is None:
         return MISSING
-    return format_rate(cell) + (f" {NOT_ABOVE_BLIND}" if blind is not None and not above(cell, blind) else "")
+    if not blind:
+        return format_rate(cell)
+    if len(blind) == 1:
+        s1, n1, s2, n2 = blind[0]
+        beaten = above(CellResult(s1, n1, ()), CellResult(s2, n2, ()))
+    else:  # several tasks: more successes, and the Mantel-Haenszel test stratified by task
+        more = sum(s1 / n1 - s2 / n2 for s1, n1, s2, n2 in blind) > 0
+        beaten = more and mantel_haenszel(blind) < ALPHA
+    return format_rate(cell) + ("" if beaten else f" {NOT_ABOVE_BLIND}")
 
 
 def task_table(
@@ -72,15 +99,16 @@ def task_table(
     methods: Sequence[str],
     tasks: Sequence[str],
     labels: Mapping[str, str],
-    base: str = "omnid",
+    base: str | None = "omnid",
     setting: str = "id",
     unseen: str | None = None,
     controls: Sequence[str] = ("blind", "scrambled"),
 ) -> list[str]:
     """One row per task and method: success (%) in ``setting`` pooled over the ranges and in each range,
     each control of the checkpoint (same setting), the ``unseen`` setting (e.g. an unseen table), and the
-    difference to ``base`` with its Fisher p; then one row per method pooled over the tasks, whose p is the
-    Mantel-Haenszel test stratified by task. Success not above its blind control is marked."""
+    difference to ``base`` with its Fisher p (no such columns for ``base=None``); then one row per method
+    pooled over the tasks, whose p is the Mantel-Haenszel test stratified by task. Success not above its
+    blind control is marked."""
     seeds = eval_seeds(records)
     cells = collect(records)
     by_range = {k: collect(_in_range(records, k)) for k in seeds}
@@ -91,12 +119,16 @@ def task_table(
         def total(table: Mapping[Key, CellResult], where: str = setting) -> CellResult | None:
             return pooled(c for t in pick if (c := table.get((method, t, where))) is not None)
 
-        cell, blind = total(cells), total(by_control["blind"]) if "blind" in by_control else None
+        cell = total(cells)
+        controlled = by_control.get("blind", {})
+        blind = [counts for t in pick for counts in _paired(cells, controlled, method, t, setting)]
         text = [label, labels.get(method, method), _marked(cell, blind)]
         text += [format_counts(c) if (c := total(by_range[k])) else MISSING for k in seeds]
         text += [format_counts(c) if (c := total(by_control[k])) else MISSING for k in controls]
         if unseen is not None:
             text.append(_rate_or_missing(total(cells, unseen)))
+        if base is None:
+            return text
         strata = _strata(cells, base, method, pick, setting)  # the tasks both were evaluated on
         if method == base or not strata:
             return [*text, "", ""]
@@ -113,10 +145,9 @@ def task_table(
         for m in methods:
             done = sum(cells.get((m, t, setting)) is not None for t in tasks)
             rows.append(row(f"**pooled, {done} tasks**" + ("*" if done < len(tasks) else ""), m, tasks))
-    base_label = labels.get(base, base)
     header = ["Task", "Method", f"{setting} (%)", *(f"range {k}" for k in seeds), *controls]
     header += [unseen] if unseen is not None else []
-    header += [f"{base_label} - method (pp)", "p"]
+    header += [] if base is None else [f"{labels.get(base, base)} - method (pp)", "p"]
     return markdown_table(header, rows)
 
 

@@ -238,6 +238,8 @@ def read_run_summary(path: Path, protocol: str) -> RunSummary:
         raise ValueError(f"{path}: format: expected {SUMMARY_FORMAT}, got {data.get('format')!r}")
     if data.get("protocol") != protocol:
         raise ValueError(f"{path}: protocol: expected {protocol!r}, got {data.get('protocol')!r}")
+    if missing := [k for k in ("settings", "evaluations", "results") if k not in data]:
+        raise ValueError(f"{path}: expected the fields settings, evaluations and results, got no {missing}")
     return RunSummary(
         protocol,
         data["settings"],

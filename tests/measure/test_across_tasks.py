@@ -76,3 +76,13 @@ def test_pooled_comparison_ranges_and_heterogeneity():
     # The second range alone shows no difference: the claim does not hold in every range.
     split = records(omnid_counts=[(12, 3), (9, 2)], dp_counts=[(3, 2), (1, 4)])
     assert only_row(pooled_comparison(split, ("omnid", "diffusion"), TASKS, LABELS))[5] == "no"
+
+
+def test_without_a_base_the_table_has_no_difference_columns_and_pooled_marks_are_stratified():
+    rs = records(omnid_counts=[(12, 11), (9, 8)], dp_counts=[(3, 2), (1, 4)], blind=1)
+    table = task_table(rs, ("omnid", "diffusion"), TASKS, LABELS, base=None, controls=("blind",))
+    assert table[0].strip("|").split("|")[-1].strip() == "blind"
+    rows = rows_of(table)
+    # DP over both tasks: 10/60 against its blind 4/60, stratified p = 0.16: not above it.
+    assert rows[("**pooled, 2 tasks**", "DP")][2].endswith(NOT_ABOVE_BLIND)
+    assert NOT_ABOVE_BLIND not in rows[("**pooled, 2 tasks**", "OmniD")][2]

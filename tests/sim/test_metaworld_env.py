@@ -195,11 +195,11 @@ def test_bad_kwargs_are_named(kwargs: dict, expected: str) -> None:
 def test_the_comparisons_volume_holds_every_hand_object_and_goal_of_the_experts_episodes() -> None:
     """OmniD's volume in the MetaWorld comparison is this suite's workspace: the hand, both objects and the
     goal stay inside it through the scripted experts' episodes of the compared tasks (MetaWorld's flat
-    observation, layouts of env seeds 0-4)."""
+    observation, layouts of the demonstrations' env seeds and of the first test seeds of each range)."""
     low, high = np.array(json.loads(metaworld_comparison.VOLUME_BOUNDS)).T
     for task in metaworld_comparison.PUBLISHED:
         env, expert = make_metaworld_env(task), ENV_POLICY_MAP[task]()
-        for seed in range(5):
+        for seed in (*range(3), *(first + k for first in metaworld_comparison.TEST_SEEDS for k in range(2))):
             env.seed(seed)
             obs, _ = env.reset()
             for _ in range(metaworld_comparison.EPISODE_LENGTH):
