@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 from lerobot_omnid.benchmark.methods import METHODS
-from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs
+from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs, write_summary
 from lerobot_omnid.benchmark.plan import (
     LABELS,
     PROFILES,
@@ -40,7 +40,7 @@ from lerobot_omnid.benchmark.plan import (
 )
 from lerobot_omnid.cli import csv_of, int_at_least
 from lerobot_omnid.measure import results
-from lerobot_omnid.measure.engine import code_commit, describe_plan, execute, is_done, state
+from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done, state
 
 OVERRIDES = {  # option: (profile field, minimum)
     "episodes": ("episodes", 1),
@@ -179,15 +179,25 @@ def main(argv: list[str] | None = None) -> int:
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return 0
+
+    def write() -> dict:
+        return write_outputs(p, tasks, runs, out, args.also, commit, command)
+
+    def keep(run: Run) -> None:  # summary.json after every finished evaluation: a kill loses nothing done
+        if run.kind == "eval":
+            write_summary(p, tasks, runs, out, commit, command)
+
     try:
         status, seconds = (
-            ({}, {}) if args.report_only else execute(runs, out, args.verbose, commit, "benchmark")
+            ({}, {})
+            if args.report_only
+            else execute(runs, out, args.verbose, commit, "benchmark", on_done=keep)
         )
     except KeyboardInterrupt:
-        write_outputs(p, tasks, runs, out, args.also, commit, command)
+        write()
         print(f"\nInterrupted: finished runs are kept, the one in progress is redone next time; {out}")
         return 130
-    summary = write_outputs(p, tasks, runs, out, args.also, commit, command)
+    summary = write()
     counts = {s: list(status.values()).count(s) for s in ("reused", "ran", "failed", "blocked")}
     print(f"\n{len(runs)} runs: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran"))
     print(f"time: {sum(seconds.values()) / 60:.1f} min; report: {out / 'report.md'}, {out / 'benchmark.png'}")

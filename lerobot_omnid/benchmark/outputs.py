@@ -261,6 +261,24 @@ def curve_lines(
     return [*lines, "", f"![position-shift curve]({chart.name})"]
 
 
+def write_summary(
+    p: BenchmarkProfile,
+    tasks: tuple[str, ...],
+    runs: list[Run],
+    out: Path,
+    commit: str | None = None,
+    command: Sequence[str] = (),
+) -> tuple[list[results.EvalEntry], list[results.EvalRecord]]:
+    """summary.json: the finished evaluations of ``runs`` (cheap: rewritten after every evaluation, so that
+    a killed campaign loses nothing done). Returns every planned evaluation and the records of the done."""
+    evaluations = [r for r in runs if r.kind == "eval"]
+    entries = [eval_entry(r) for r in evaluations]
+    own = [results.record_of(e) for e, r in zip(entries, evaluations, strict=True) if is_done(r)]
+    out.mkdir(parents=True, exist_ok=True)
+    results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
+    return entries, own
+
+
 def write_outputs(
     p: BenchmarkProfile,
     tasks: tuple[str, ...],
@@ -272,11 +290,7 @@ def write_outputs(
 ) -> dict:
     """summary.json (this folder's evaluations), then report.md, benchmark.png, position_curve.png and
     results.json from them and from the summaries of ``also`` (other folders or summary files)."""
-    evaluations = [r for r in runs if r.kind == "eval"]
-    entries = [eval_entry(r) for r in evaluations]
-    own = [results.record_of(e) for e, r in zip(entries, evaluations, strict=True) if is_done(r)]
-    out.mkdir(parents=True, exist_ok=True)
-    results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
+    entries, own = write_summary(p, tasks, runs, out, commit, command)
     groups = [own]
     for path in also:
         profile, records = results.read_summary(path)
