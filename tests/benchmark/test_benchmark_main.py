@@ -425,3 +425,32 @@ def test_task_steps_come_from_a_sizing_file(monkeypatch, tmp_path, capsys):
     with pytest.raises(SystemExit):
         bench.main([*argv, "--out", str(tmp_path / "c")])
     assert "got none for ['get_coffee']" in capsys.readouterr().err
+
+
+def test_summary_is_kept_after_every_evaluation(monkeypatch, tmp_path):
+    """When an evaluation starts, summary.json already holds every evaluation finished before it: a
+    campaign killed mid-run keeps what it measured."""
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    calls: list[str] = []
+    fake = _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0})
+    seen: list[int] = []
+
+    def run(cmd, log_path, on_line=None):
+        if Path(cmd[0]).name == "lerobot-eval":
+            summary = tmp_path / "summary.json"
+            seen.append(len(json.loads(summary.read_text())["evaluations"]) if summary.is_file() else 0)
+        return fake(cmd, log_path, on_line)
+
+    monkeypatch.setattr(engine, "run_logged", run)
+    argv = [
+        "--out",
+        str(tmp_path),
+        "--settings",
+        "id",
+        "--control-settings",
+        "none",
+        "--heldout-episodes",
+        "0",
+    ]
+    assert bench.main(argv) == 0
+    assert seen == list(range(len(seen))) and len(seen) == 2
