@@ -378,6 +378,7 @@ def test_six_tasks_profile_reports_every_task_with_controls_and_ranges(monkeypat
     assert "| 18/30 (42.3-75.4 %) | 18/30 (42.3-75.4 %) |" in rows[("**pooled, 2 tasks**", "OmniD")]
     pooled = report.split("## OmniD against each method over the tasks")[1].split("\n## ")[0]
     assert "| DP | +40.0" in pooled and "| yes |" in pooled
+    assert "| add_condiment | 100 | 100 |" in report  # the paper's Table 1 beside, OmniD and DP
     together = report.split("## One model for every task against one model per task")[1]
     assert "| **pooled, 2 tasks** | OmniD multi-task | 40.0 (" in together
     assert "| OmniD | -20.0" in together and "| DP | +0.0" in together
