@@ -16,6 +16,7 @@ import subprocess
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import matplotlib.font_manager  # noqa: F401  builds its font cache (with fc-list) now, not inside a test
 import pytest
 import torch
 

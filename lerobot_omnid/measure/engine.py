@@ -119,8 +119,9 @@ def plan(runs: Sequence[Run], out: Path) -> list[Run]:
             if path not in files:  # each file hashed once per plan, however many runs read it
                 files[path] = file_fingerprint(path)
         inputs = [files[path] for path in run.inputs]
-        # Paths inside the campaign's folder count relative to it: a moved or copied folder resumes.
-        cmd = [arg.replace(str(out), "<out>") for arg in run.cmd]
+        # Paths inside the campaign's folder count relative to it and the program by its name: a moved or
+        # copied folder, or another checkout's, resumes.
+        cmd = [Path(run.cmd[0]).name, *(arg.replace(str(out), "<out>") for arg in run.cmd[1:])]
         content = json.dumps([cmd, [fingerprints[n] for n in run.needs], inputs])
         fingerprints[run.name] = hashlib.sha256(content.encode()).hexdigest()[:16]
         stamp = out / STAMPS / f"{run.name}.json"
