@@ -17,7 +17,12 @@ Resumable: a run is done when its output is complete and its stamp says it was m
 inputs planned now (:mod:`lerobot_omnid.measure.engine`); anything else is deleted and rerun, with everything
 downstream of it, so a folder never mixes plans. Each run logs to <out>/logs/.
 
-    omnid-benchmark --report-only --out A --also B docs/results/mini_seed1001.json   # results of 3 folders
+    omnid-benchmark --report-only --out A --also B docs/results/mini_seed1002_eval30_cpu2.json  # 3 folders
+
+A campaign longer than one machine's session continues in a fresh folder from its committed summary:
+``--resume-from docs/results/<campaign>.json`` keeps the planned evaluations it holds (matched by
+fingerprint, so a summary of another plan keeps nothing) and records and trains only what the missing ones
+need, each dataset and model just before its first use; the new ``summary.json`` holds both.
 """
 
 from __future__ import annotations
@@ -40,7 +45,7 @@ from lerobot_omnid.benchmark.plan import (
 )
 from lerobot_omnid.cli import csv_of, int_at_least
 from lerobot_omnid.measure import results
-from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done, state
+from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, schedule, state
 
 OVERRIDES = {  # option: (profile field, minimum)
     "episodes": ("episodes", 1),
@@ -109,6 +114,14 @@ def build_parser() -> argparse.ArgumentParser:
         "whose evaluations the report combines with this folder's",
     )
     parser.add_argument(
+        "--resume-from",
+        type=Path,
+        metavar="SUMMARY",
+        help="an earlier campaign's summary.json (e.g. committed under docs/results/): the planned "
+        "evaluations it holds (same command and inputs, by fingerprint) are not run again, nor the "
+        "datasets and models only they need; this folder's summary.json keeps them",
+    )
+    parser.add_argument(
         "--task-steps",
         type=Path,
         metavar="SIZING",
@@ -165,40 +178,50 @@ def main(argv: list[str] | None = None) -> int:
             results.check_comparable(dataclasses.asdict(p), profile, str(path))
         except ValueError as e:
             parser.error(f"--also: {e}")
+    resumed: list[results.EvalRecord] = []
+    if args.resume_from:
+        try:
+            profile, resumed = results.read_summary(args.resume_from)
+            results.check_comparable(dataclasses.asdict(p), profile, str(args.resume_from))
+        except ValueError as e:
+            parser.error(f"--resume-from: {e}")
     commit = code_commit()
     command = ["omnid-benchmark", *(sys.argv[1:] if argv is None else argv)]
     runs = build_plan(p, out, tasks)
+    recorded = {r.fingerprint for r in resumed if r.fingerprint}
     print("\n".join(settings_markdown(p, tasks)))
     kinds = ("record", "merge", "prepare", "train", "calibration", "eval", "offline")
     kinds = {k: sum(r.kind == k for r in runs) for k in kinds}
     per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
-    todo = sum(not is_done(r) for r in runs)
+    todo = len(schedule(runs, recorded))
     stale = sum(state(r) == "stale" for r in runs)
     redo = f" ({stale} made for another plan: rerun)" if stale else ""
-    print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}; {out}")
+    kept = sum(r.kind == "eval" and r.fingerprint in recorded for r in runs)
+    kept = f", {kept} evaluations kept from {args.resume_from}" if args.resume_from else ""
+    print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}{kept}; {out}")
     if args.dry_run:
         print("\n".join(describe_plan(runs)))
         return 0
 
     def write() -> dict:
-        return write_outputs(p, tasks, runs, out, args.also, commit, command)
+        return write_outputs(p, tasks, runs, out, args.also, commit, command, resumed)
 
     def keep(run: Run) -> None:  # summary.json after every finished evaluation: a kill loses nothing done
         if run.kind == "eval":
-            write_summary(p, tasks, runs, out, commit, command)
+            write_summary(p, tasks, runs, out, commit, command, resumed)
 
     try:
         status, seconds = (
             ({}, {})
             if args.report_only
-            else execute(runs, out, args.verbose, commit, "benchmark", on_done=keep)
+            else execute(runs, out, args.verbose, commit, "benchmark", on_done=keep, recorded=recorded)
         )
     except KeyboardInterrupt:
         write()
         print(f"\nInterrupted: finished runs are kept, the one in progress is redone next time; {out}")
         return 130
     summary = write()
-    counts = {s: list(status.values()).count(s) for s in ("reused", "ran", "failed", "blocked")}
+    counts = {s: list(status.values()).count(s) for s in ("reused", "recorded", "ran", "failed", "blocked")}
     print(f"\n{len(runs)} runs: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran"))
     print(f"time: {sum(seconds.values()) / 60:.1f} min; report: {out / 'report.md'}, {out / 'benchmark.png'}")
     print(f"this folder's evaluations (copy under docs/results/ to combine): {out / results.SUMMARY}")

@@ -49,7 +49,7 @@ from lerobot_omnid.benchmark.plan import (
 )
 from lerobot_omnid.measure import across_tasks, charts, report, results
 from lerobot_omnid.measure.across_tasks import ALPHA, NOT_ABOVE_BLIND
-from lerobot_omnid.measure.engine import Run, is_done, stamp_commit
+from lerobot_omnid.measure.engine import Run, is_done, portable_command, stamp_commit
 from lerobot_omnid.measure.report import MISSING
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
@@ -158,8 +158,9 @@ def eval_entry(run: Run) -> results.EvalEntry:
         run.output / "eval_info.json",
         run.train_seed,
         run.control,
-        run.cmd,
+        portable_command(run.cmd),
         stamp_commit(run),
+        run.fingerprint,
     )
 
 
@@ -293,12 +294,16 @@ def write_summary(
     out: Path,
     commit: str | None = None,
     command: Sequence[str] = (),
+    resumed: Sequence[results.EvalRecord] = (),
 ) -> tuple[list[results.EvalEntry], list[results.EvalRecord]]:
     """summary.json: the finished evaluations of ``runs`` (cheap: rewritten after every evaluation, so that
-    a killed campaign loses nothing done). Returns every planned evaluation and the records of the done."""
+    a killed campaign loses nothing done), with the ``resumed`` records (an earlier campaign's summary) of
+    the planned evaluations not done here. Returns every planned evaluation and the records of the done."""
     evaluations = [r for r in runs if r.kind == "eval"]
     entries = [eval_entry(r) for r in evaluations]
     own = [results.record_of(e) for e, r in zip(entries, evaluations, strict=True) if is_done(r)]
+    kept = {r.fingerprint for r in evaluations if not is_done(r)}
+    own += [r for r in resumed if r.fingerprint in kept]
     out.mkdir(parents=True, exist_ok=True)
     results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
     return entries, own
@@ -312,10 +317,12 @@ def write_outputs(
     also: Sequence[Path] = (),
     commit: str | None = None,
     command: Sequence[str] = (),
+    resumed: Sequence[results.EvalRecord] = (),
 ) -> dict:
-    """summary.json (this folder's evaluations), then report.md, benchmark.png, position_curve.png and
-    results.json from them and from the summaries of ``also`` (other folders or summary files)."""
-    entries, own = write_summary(p, tasks, runs, out, commit, command)
+    """summary.json (this folder's evaluations and the ``resumed`` ones), then report.md, benchmark.png,
+    position_curve.png and results.json from them and from the summaries of ``also`` (other folders or
+    summary files)."""
+    entries, own = write_summary(p, tasks, runs, out, commit, command, resumed)
     groups = [own]
     for path in also:
         profile, records = results.read_summary(path)

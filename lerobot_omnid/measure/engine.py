@@ -21,7 +21,7 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -155,6 +155,39 @@ def is_done(run: Run) -> bool:
     return state(run) == "done"
 
 
+def schedule(runs: Sequence[Run], recorded: Collection[str] = ()) -> list[Run]:
+    """The runs still to run, in the order to run them: every run that is not done and whose result is not
+    ``recorded`` (fingerprints of evaluations kept in an earlier campaign's run summary), each preceded by
+    those of its needs not done yet, so that a dataset or a model is made just before its first use. A run
+    whose consumers are all done or recorded is not run: a campaign resumed in a fresh folder from its
+    committed summary trains only the models whose evaluations are missing."""
+    by_name = {run.name: run for run in runs}
+    consumed = {name for run in runs for name in run.needs}
+    order: list[Run] = []
+    seen: set[str] = set()
+
+    def visit(run: Run) -> None:
+        if run.name in seen:
+            return
+        seen.add(run.name)
+        for name in run.needs:
+            if not is_done(by_name[name]):
+                visit(by_name[name])
+        order.append(run)
+
+    for run in runs:
+        if run.name not in consumed and not is_done(run) and run.fingerprint not in recorded:
+            visit(run)
+    return order
+
+
+def portable_command(cmd: Sequence[str]) -> tuple[str, ...]:
+    """``cmd`` with the paths under the current folder made relative to it, as a run summary records it (a
+    committed summary names no folder of one machine)."""
+    here = str(Path.cwd()) + "/"
+    return tuple(arg.replace(here, "") for arg in cmd)
+
+
 def describe_plan(runs: Sequence[Run]) -> list[str]:
     """Every run with its state and its command line (``--dry-run``)."""
     lines = []
@@ -220,21 +253,21 @@ def execute(
     desc: str = "runs",
     on_done: Callable[[Run], object] | None = None,
     stop_on_failure: bool = False,
+    recorded: Collection[str] = (),
 ) -> tuple[dict[str, str], dict[str, float]]:
-    """Run, in order, every run that is not done; a failed run blocks the runs that need its output.
+    """Run the runs :func:`schedule` gives, in its order; a failed run blocks the runs that need its output.
 
     A run that succeeds gets its stamp (fingerprint, command, ``commit``, seconds), then ``on_done(run)``
     (e.g. a protocol's run summary). ``stop_on_failure`` exits at the first failure, naming its log.
-    Returns each run's status ("reused", "ran", "failed", "blocked") and the seconds of those run.
+    Returns each run's status ("reused": done before; "recorded": its result is in ``recorded``, or it is
+    needed only by such runs; "ran", "failed", "blocked") and the seconds of those run.
     """
-    status: dict[str, str] = {}
+    to_run = schedule(runs, recorded)
+    status = {run.name: "reused" if is_done(run) else "recorded" for run in runs}
     seconds: dict[str, float] = {}
-    bar = tqdm(runs, desc=desc, unit="run", file=sys.stdout, dynamic_ncols=True)
+    bar = tqdm(to_run, desc=desc, unit="run", file=sys.stdout, dynamic_ncols=True)
     for run in bar:
         bar.set_postfix_str(run.name)
-        if is_done(run):
-            status[run.name] = "reused"
-            continue
         blocked = [n for n in run.needs if status.get(n) in ("failed", "blocked")]
         if blocked:
             status[run.name] = "blocked"

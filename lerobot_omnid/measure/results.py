@@ -46,7 +46,8 @@ with the value a summary written before the field existed means."""
 @dataclass(frozen=True)
 class EvalEntry:
     """A finished evaluation of the plan: its cell, eval ``seed``, ``eval_info.json``, the training seed of
-    its model, its control ("" for the checkpoint as trained), its command and the commit that ran it."""
+    its model, its control ("" for the checkpoint as trained), its command, the commit that ran it and the
+    engine's fingerprint of the run."""
 
     key: Key
     seed: int | None
@@ -55,6 +56,7 @@ class EvalEntry:
     control: str = ""
     command: tuple[str, ...] = ()
     commit: str | None = None
+    fingerprint: str = ""
 
 
 @dataclass(frozen=True)
@@ -62,7 +64,8 @@ class EvalRecord:
     """A finished evaluation: ``successes`` of ``episodes`` for one cell, control, training and eval seed.
     ``source``: the ``eval_info.json`` or summary file it was read from; ``commit``: the code commit that
     ran it (None if not recorded); ``tags``: what else tells this cell from others of the protocol, sorted
-    (name, value) pairs (a rig, a training budget, a perturbation level).
+    (name, value) pairs (a rig, a training budget, a perturbation level); ``fingerprint``: the engine's
+    fingerprint of the run that made it ("" if not recorded), by which a resumed campaign knows it done.
     """
 
     key: Key
@@ -75,6 +78,7 @@ class EvalRecord:
     commit: str | None = None
     command: tuple[str, ...] = ()
     tags: tuple[tuple[str, str], ...] = ()
+    fingerprint: str = ""
 
     @property
     def identity(self) -> tuple:
@@ -98,6 +102,7 @@ class EvalRecord:
             "commit": self.commit,
             "command": list(self.command),
             "tags": dict(self.tags),
+            **({"fingerprint": self.fingerprint} if self.fingerprint else {}),
         }
 
     @classmethod
@@ -115,6 +120,7 @@ class EvalRecord:
                 data.get("commit"),
                 tuple(data.get("command", ())),
                 tags_of(data.get("tags", {})),
+                str(data.get("fingerprint", "")),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"{source}: expected an evaluation record with {e}, got {dict(data)}") from e
@@ -170,6 +176,7 @@ def record_of(entry: EvalEntry) -> EvalRecord:
         str(entry.path),
         entry.commit,
         entry.command,
+        fingerprint=entry.fingerprint,
     )
 
 

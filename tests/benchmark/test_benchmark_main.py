@@ -154,8 +154,9 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     counts = (blind["successes"], blind["episodes"], blind["train_seed"], blind["commit"])
     assert counts == (0, 10, 1000, "abc123")
 
-    # Resume: nothing finished is redone; an eval whose result is gone and an incomplete training run (its
-    # folder without a checkpoint) are. The DP evaluations stay: the same command remakes the checkpoint.
+    # Resume: nothing finished is redone; an eval whose result is gone is. A model whose checkpoint is gone
+    # is trained again only when an evaluation needs it (the same command remakes it; its done evaluations
+    # stay).
     calls.clear()
     assert bench.main(["--out", str(out)]) == 0 and calls == []
     (out / "eval" / "diffusion" / TASK0 / "ood2" / "seed1" / "eval_info.json").unlink()
@@ -163,9 +164,52 @@ def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     assert calls == ["lerobot-eval"]
     (out / "train" / "diffusion" / TASK0 / CHECKPOINT / "model.safetensors").unlink()
     calls.clear()
+    assert bench.main(["--out", str(out)]) == 0 and calls == []
+    (out / "eval" / "diffusion" / TASK0 / "ood2" / "seed1" / "eval_info.json").unlink()
     assert bench.main(["--out", str(out)]) == 0
-    assert calls == ["lerobot-train"]
+    assert calls == ["lerobot-train", "lerobot-eval"]
     assert "removing" in capsys.readouterr().out
+
+
+def test_resume_from_a_committed_summary_in_a_fresh_folder(monkeypatch, tmp_path, capsys):
+    """A campaign continued on another machine: the evaluations of the summary are kept by fingerprint,
+    and only what a missing one needs is recorded and trained again, just before its use."""
+    calls: list[str] = []
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {"omnid": 60.0, "diffusion": 20.0}))
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    first = tmp_path / "first"
+    options = ["--settings", "id,ood2", "--heldout-episodes", "0"]  # evaluations only, no open-loop runs
+    assert bench.main(["--out", str(first), *options]) == 0
+    done = json.loads((first / "summary.json").read_text())
+    assert all(len(e["fingerprint"]) == 16 for e in done["evaluations"])
+    committed = tmp_path / "committed.json"
+    committed.write_text(json.dumps(done))
+
+    calls.clear()
+    fresh = tmp_path / "fresh"
+    assert bench.main(["--out", str(fresh), *options, "--resume-from", str(committed)]) == 0
+    assert calls == []
+    again = json.loads((fresh / "summary.json").read_text())
+    assert sorted(map(json.dumps, again["evaluations"])) == sorted(map(json.dumps, done["evaluations"]))
+    assert (fresh / "report.md").read_text().count("60.0 (31.3-83.2)") > 0
+
+    # One evaluation missing from the summary: its dataset, its model and itself run, in that order.
+    missing = next(e for e in done["evaluations"] if e["model"] == "omnid" and e["setting"] == "ood2")
+    kept = [e for e in done["evaluations"] if e != missing]
+    committed.write_text(json.dumps({**done, "evaluations": kept}))
+    calls.clear()
+    assert bench.main(["--out", str(tmp_path / "third"), *options, "--resume-from", str(committed)]) == 0
+    assert calls == ["omnid-record", "lerobot-train", "lerobot-eval"]
+    assert len(json.loads((tmp_path / "third" / "summary.json").read_text())["evaluations"]) == len(
+        done["evaluations"]
+    )
+
+    # Another plan (other evaluation sizes): no fingerprint matches, nothing is kept.
+    calls.clear()
+    other = [*options, "--eval-episodes", "4", "--resume-from", str(committed)]
+    assert bench.main(["--out", str(tmp_path / "other"), *other]) == 0
+    assert calls.count("lerobot-eval") == len(done["evaluations"])
+    assert "0 evaluations kept from" in capsys.readouterr().out
 
 
 def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
@@ -173,7 +217,8 @@ def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):
     calls: list[str] = []
     monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {}, fail=("lerobot-train",)))
     assert bench.main(["--out", str(tmp_path), "--settings", "id,ood1"]) == 1
-    assert calls == ["omnid-record"] * 3 + ["lerobot-train", "lerobot-train"]
+    # each dataset is recorded just before its first use (the held-out ones before the open-loop runs)
+    assert calls[0] == "omnid-record" and sorted(calls) == ["lerobot-train"] * 2 + ["omnid-record"] * 3
     out = capsys.readouterr().out
     # blocked: 2 x 2 evaluations, 2 x 2 open-loop runs, OmniD's 3 calibration files and 3 control
     # evaluations, DP's blind evaluation
@@ -224,10 +269,11 @@ def test_ctrl_c_keeps_finished_runs_and_writes_the_report(monkeypatch, tmp_path,
     calls.clear()
     monkeypatch.setattr(engine, "run_logged", fake)
     assert bench.main(["--out", str(tmp_path)]) == 0
+    # the training set was recorded before the interruption, the 6 held-out and few-shot sets were not yet
     assert (
         calls.count("lerobot-train") == 1
         and calls.count("lerobot-eval") == 23
-        and "omnid-record" not in calls
+        and calls.count("omnid-record") == 6
     )
 
 

@@ -71,3 +71,25 @@ def test_run_protocol_writes_the_outputs_after_each_run_and_never_on_a_dry_run(t
     assert written == [0]
     engine.run_protocol(runs, tmp_path, "test", write_outputs)
     assert written == [0, 1, 2, 2]
+
+
+def test_schedule_makes_each_input_just_before_its_first_use_and_skips_recorded_results(tmp_path):
+    data, other = evaluation(tmp_path, "data"), evaluation(tmp_path, "other")
+    first, second = (evaluation(tmp_path, n, needs=["data"]) for n in ("first", "second"))
+    runs = plan([data, other, first, second], tmp_path)
+    assert [r.name for r in engine.schedule(runs)] == ["other", "data", "first", "second"]
+    recorded = {r.fingerprint for r in runs if r.name in ("first", "other")}
+    assert [r.name for r in engine.schedule(runs, recorded)] == ["data", "second"]
+    recorded.add(runs[3].fingerprint)  # every consumer of "data" recorded: "data" is not made at all
+    assert engine.schedule(runs, recorded) == []
+
+
+def test_recorded_commands_name_paths_relative_to_the_working_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    cmd = ("lerobot-eval", f"--output_dir={tmp_path}/outputs/eval", "--seed=1000")
+    assert engine.portable_command(cmd) == ("lerobot-eval", "--output_dir=outputs/eval", "--seed=1000")
+
+
+def test_a_fingerprint_names_the_program_not_where_it_is_installed(tmp_path):
+    here, there = (Run("a", "eval", (f"{venv}/bin/lerobot-eval", "--seed=1"), tmp_path) for venv in "xy")
+    assert plan([here], tmp_path)[0].fingerprint == plan([there], tmp_path)[0].fingerprint
