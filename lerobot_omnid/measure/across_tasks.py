@@ -108,7 +108,7 @@ def task_table(
     each control of the checkpoint (same setting), the ``unseen`` setting (e.g. an unseen table), and the
     difference to ``base`` with its Fisher p (no such columns for ``base=None``); then one row per method
     pooled over the tasks, whose p is the Mantel-Haenszel test stratified by task. Success not above its
-    blind control is marked."""
+    blind control is marked, in ``unseen`` too (against the blind control in ``setting``)."""
     seeds = eval_seeds(records)
     cells = collect(records)
     by_range = {k: collect(_in_range(records, k)) for k in seeds}
@@ -125,8 +125,15 @@ def task_table(
         text = [label, labels.get(method, method), _marked(cell, blind)]
         text += [format_counts(c) if (c := total(by_range[k])) else MISSING for k in seeds]
         text += [format_counts(c) if (c := total(by_control[k])) else MISSING for k in controls]
-        if unseen is not None:
-            text.append(_rate_or_missing(total(cells, unseen)))
+        if (
+            unseen is not None
+        ):  # its blind control is the ID one: same env seeds, and a blind policy sees no table
+            unseen_blind = [
+                (a.successes, a.episodes, b.successes, b.episodes)
+                for t in pick
+                if (a := cells.get((method, t, unseen))) and (b := controlled.get((method, t, setting)))
+            ]
+            text.append(_marked(total(cells, unseen), unseen_blind))
         if base is None:
             return text
         strata = _strata(cells, base, method, pick, setting)  # the tasks both were evaluated on

@@ -86,3 +86,14 @@ def test_without_a_base_the_table_has_no_difference_columns_and_pooled_marks_are
     # DP over both tasks: 10/60 against its blind 4/60, stratified p = 0.16: not above it.
     assert rows[("**pooled, 2 tasks**", "DP")][2].endswith(NOT_ABOVE_BLIND)
     assert NOT_ABOVE_BLIND not in rows[("**pooled, 2 tasks**", "OmniD")][2]
+
+
+def test_an_unseen_table_cell_is_marked_against_the_id_blind_control():
+    rs = records(omnid_counts=[(12, 11), (9, 8)], dp_counts=[(3, 2), (1, 4)], blind=1)
+    rs += [record("omnid", "task_a", 12, seed, setting="ood2") for seed in (1, 2)]  # 24/30 vs blind 2/30
+    rs += [record("diffusion", "task_a", 2, seed, setting="ood2") for seed in (1, 2)]  # 4/30 vs 2/30
+    rows = rows_of(task_table(rs, ("omnid", "diffusion"), TASKS, LABELS, unseen="ood2"))
+    omnid_ood2, dp_ood2 = rows[("task_a", "OmniD")][7], rows[("task_a", "DP")][7]
+    assert omnid_ood2.startswith("80.0 (") and NOT_ABOVE_BLIND not in omnid_ood2
+    assert dp_ood2.startswith("13.3 (") and dp_ood2.endswith(NOT_ABOVE_BLIND)
+    assert rows[("task_b", "OmniD")][7] == "—"  # not evaluated there
