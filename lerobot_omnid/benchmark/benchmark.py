@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     kept = f", {kept} evaluations kept from {args.resume_from}" if args.resume_from else ""
     print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}{kept}; {out}")
     if args.dry_run:
-        print("\n".join(describe_plan(runs)))
+        print("\n".join(describe_plan(runs, recorded)))
         return 0
 
     def write() -> dict:

@@ -188,11 +188,16 @@ def portable_command(cmd: Sequence[str]) -> tuple[str, ...]:
     return tuple(arg.replace(here, "") for arg in cmd)
 
 
-def describe_plan(runs: Sequence[Run]) -> list[str]:
-    """Every run with its state and its command line (``--dry-run``)."""
+def describe_plan(runs: Sequence[Run], recorded: Collection[str] = ()) -> list[str]:
+    """Every run with its state and its command line (``--dry-run``); a run not done whose result is
+    ``recorded`` (see :func:`schedule`) shows as such."""
+    to_run = {run.name for run in schedule(runs, recorded)}
     lines = []
     for i, run in enumerate(runs, 1):
-        lines += [f"[{i}/{len(runs)}] {run.name} ({state(run)})", "  " + shlex.join(run.cmd)]
+        now = state(run)
+        if now != "done" and run.name not in to_run:
+            now = "recorded" if run.fingerprint in recorded else "not needed: its results are recorded"
+        lines += [f"[{i}/{len(runs)}] {run.name} ({now})", "  " + shlex.join(run.cmd)]
     return lines
 
 

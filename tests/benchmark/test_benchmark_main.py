@@ -189,6 +189,10 @@ def test_resume_from_a_committed_summary_in_a_fresh_folder(monkeypatch, tmp_path
     fresh = tmp_path / "fresh"
     assert bench.main(["--out", str(fresh), *options, "--resume-from", str(committed)]) == 0
     assert calls == []
+    assert bench.main(["--out", str(fresh), *options, "--resume-from", str(committed), "--dry-run"]) == 0
+    dry = capsys.readouterr().out
+    assert "record/select_apple_bcde (not needed: its results are recorded)" in dry
+    assert "eval/omnid/select_apple/ood2/seed1 (recorded)" in dry
     again = json.loads((fresh / "summary.json").read_text())
     assert sorted(map(json.dumps, again["evaluations"])) == sorted(map(json.dumps, done["evaluations"]))
     assert (fresh / "report.md").read_text().count("60.0 (31.3-83.2)") > 0
