@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from dataclasses import astuple
 from pathlib import Path
 
 import pytest
@@ -261,6 +262,33 @@ def sentence_errors(text: str, records: Sequence[EvalRecord], fewshot: Sequence[
     return errors
 
 
+SIX_TASKS_SUMMARY = "six_tasks_cpu2.json"
+"""The six-task campaign's summary: docs/results.md's "Six tasks" rebuild command reads it."""
+SIX_TASK_METHODS = ("omnid", "diffusion", "act", "vqbet")
+SIX_TASK_SENTENCE = r"on `(\w+)` ID " + ", ".join([r"(\d+)/(\d+) vs (\d+)/(\d+)", *[r"(\d+)/(\d+)"] * 2])
+"""The headline's six-task sentence: a task's ID counts of OmniD, DP, ACT and VQ-BeT."""
+
+
+def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
+    """The headline's six-task counts against the campaign's summary."""
+    errors: list[str] = []
+    if m := claim(" ".join(headline_section(readme).split()), SIX_TASK_SENTENCE, errors):
+        task, stated = m[1], [int(x) for x in m.groups()[1:]]
+        cells = collect(records)
+        truth = [n for model in SIX_TASK_METHODS for n in astuple(cells[(model, task, "id")])[:2]]
+        if stated != truth:
+            errors.append(f"headline: six tasks, {task}: stated {stated}, the summary gives {truth}")
+    return errors
+
+
+def test_readme_six_task_counts_match_the_campaign_summary():
+    records = load([SIX_TASKS_SUMMARY])
+    readme = README.read_text()
+    assert six_task_errors(readme, records) == []
+    edited = readme.replace("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30")
+    assert edited != readme and len(six_task_errors(edited, records)) == 1
+
+
 @pytest.fixture(scope="module")
 def headline_records() -> list[EvalRecord]:
     return load(HEADLINE_SUMMARIES)
@@ -359,7 +387,7 @@ def test_rebuild_commands_name_the_committed_summaries():
     """The results page's rebuild commands (the only places it writes ``docs/results/``: its links are
     relative) pool the files this test checks, and they exist."""
     named = set(re.findall(r"docs/results/([\w.-]+\.json)", RESULTS_PAGE.read_text()))
-    assert set(HEADLINE_SUMMARIES) | set(FEWSHOT_SUMMARIES) <= named
+    assert set(HEADLINE_SUMMARIES) | set(FEWSHOT_SUMMARIES) | {SIX_TASKS_SUMMARY} <= named
     assert [name for name in named if not (SUMMARIES / name).is_file()] == []
 
 
