@@ -14,8 +14,9 @@ with Wilson intervals and Fisher tests), ``<out>/benchmark.png`` and ``<out>/pos
     omnid-benchmark --profile paper    # every method, task and setting at the paper's sizes (GPU, days)
 
 Resumable: a run is done when its output is complete and its stamp says it was made by the very command and
-inputs planned now (:mod:`lerobot_omnid.measure.engine`); anything else is deleted and rerun, with everything
-downstream of it, so a folder never mixes plans. Each run logs to <out>/logs/.
+inputs planned now (:mod:`lerobot_omnid.measure.engine`); anything else is deleted and rerun when a result
+needs it, with everything downstream of it, so a report never shows results made for another plan. Each run
+logs to <out>/logs/.
 
     omnid-benchmark --report-only --out A --also B docs/results/mini_seed1002_eval30_cpu2.json  # 3 folders
 
@@ -119,7 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SUMMARY",
         help="an earlier campaign's summary.json (e.g. committed under docs/results/): the planned "
         "evaluations it holds (same command and inputs, by fingerprint) are not run again, nor the "
-        "datasets and models only they need; this folder's summary.json keeps them",
+        "datasets and models only they need; this folder's summary.json keeps them. Open-loop runs "
+        "(--heldout-episodes) are not in a summary: they run again, with the models they need",
     )
     parser.add_argument(
         "--task-steps",
@@ -193,11 +195,15 @@ def main(argv: list[str] | None = None) -> int:
     kinds = ("record", "merge", "prepare", "train", "calibration", "eval", "offline")
     kinds = {k: sum(r.kind == k for r in runs) for k in kinds}
     per_kind = ", ".join(f"{n} {k}" for k, n in kinds.items() if n)
-    todo = len(schedule(runs, recorded))
-    stale = sum(state(r) == "stale" for r in runs)
+    to_run = schedule(runs, recorded)
+    todo = len(to_run)
+    stale = sum(state(r) == "stale" for r in to_run)
     redo = f" ({stale} made for another plan: rerun)" if stale else ""
     kept = sum(r.kind == "eval" and r.fingerprint in recorded for r in runs)
+    unplanned = len(recorded - {r.fingerprint for r in runs})
     kept = f", {kept} evaluations kept from {args.resume_from}" if args.resume_from else ""
+    if unplanned:  # e.g. other tasks: not in this folder's summary.json, keep the file they are in
+        kept += f" ({unplanned} of its evaluations are not in this plan and not in this folder's summary)"
     print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}{kept}; {out}")
     if args.dry_run:
         print("\n".join(describe_plan(runs, recorded)))
@@ -221,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\nInterrupted: finished runs are kept, the one in progress is redone next time; {out}")
         return 130
     summary = write()
-    counts = {s: list(status.values()).count(s) for s in ("reused", "recorded", "ran", "failed", "blocked")}
+    states = ("reused", "recorded", "not needed", "ran", "failed", "blocked")
+    counts = {s: list(status.values()).count(s) for s in states}
     print(f"\n{len(runs)} runs: " + ", ".join(f"{n} {s}" for s, n in counts.items() if n or s == "ran"))
     print(f"time: {sum(seconds.values()) / 60:.1f} min; report: {out / 'report.md'}, {out / 'benchmark.png'}")
     print(f"this folder's evaluations (copy under docs/results/ to combine): {out / results.SUMMARY}")

@@ -48,6 +48,7 @@ from lerobot_omnid.measure.engine import (
     is_done,
     plan,
     report_from_summary,
+    schedule,
     stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
@@ -286,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.report_only:
         # Each pass runs what the validation so far calls for (a task below the threshold gets its next
         # budget in the next pass); the summary is rewritten after every finished run.
-        while any(not is_done(r) for r in runs):
+        while schedule(runs):
             execute(
                 runs,
                 out,

@@ -125,9 +125,8 @@ def task_table(
         text = [label, labels.get(method, method), _marked(cell, blind)]
         text += [format_counts(c) if (c := total(by_range[k])) else MISSING for k in seeds]
         text += [format_counts(c) if (c := total(by_control[k])) else MISSING for k in controls]
-        if (
-            unseen is not None
-        ):  # its blind control is the ID one: same env seeds, and a blind policy sees no table
+        if unseen is not None:
+            # Its blind control is the ID one: the same env seeds, and a blind policy sees no table.
             unseen_blind = [
                 (a.successes, a.episodes, b.successes, b.episodes)
                 for t in pick

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import re
 import shlex
 import shutil
 import subprocess
@@ -119,9 +120,10 @@ def plan(runs: Sequence[Run], out: Path) -> list[Run]:
             if path not in files:  # each file hashed once per plan, however many runs read it
                 files[path] = file_fingerprint(path)
         inputs = [files[path] for path in run.inputs]
-        # Paths inside the campaign's folder count relative to it and the program by its name: a moved or
-        # copied folder, or another checkout's, resumes.
-        cmd = [Path(run.cmd[0]).name, *(arg.replace(str(out), "<out>") for arg in run.cmd[1:])]
+        # Paths inside the campaign's folder count relative to it and the program by its name (any Python
+        # as "python"): a moved or copied folder, or another checkout's, resumes.
+        program = re.sub(r"^python[\d.]*$", "python", Path(run.cmd[0]).name)
+        cmd = [program, *(arg.replace(str(out), "<out>") for arg in run.cmd[1:])]
         content = json.dumps([cmd, [fingerprints[n] for n in run.needs], inputs])
         fingerprints[run.name] = hashlib.sha256(content.encode()).hexdigest()[:16]
         stamp = out / STAMPS / f"{run.name}.json"
@@ -194,11 +196,17 @@ def describe_plan(runs: Sequence[Run], recorded: Collection[str] = ()) -> list[s
     to_run = {run.name for run in schedule(runs, recorded)}
     lines = []
     for i, run in enumerate(runs, 1):
-        now = state(run)
-        if now != "done" and run.name not in to_run:
-            now = "recorded" if run.fingerprint in recorded else "not needed: its results are recorded"
+        now = state(run) if run.name in to_run or is_done(run) else _idle_state(run, recorded)
         lines += [f"[{i}/{len(runs)}] {run.name} ({now})", "  " + shlex.join(run.cmd)]
     return lines
+
+
+def _idle_state(run: Run, recorded: Collection[str]) -> str:
+    """Why :func:`schedule` leaves ``run`` out: "reused" (done), "recorded" (its result is kept elsewhere) or
+    "not needed" (only done or recorded runs need it)."""
+    if is_done(run):
+        return "reused"
+    return "recorded" if run.fingerprint in recorded else "not needed"
 
 
 def code_commit() -> str | None:
@@ -264,11 +272,11 @@ def execute(
 
     A run that succeeds gets its stamp (fingerprint, command, ``commit``, seconds), then ``on_done(run)``
     (e.g. a protocol's run summary). ``stop_on_failure`` exits at the first failure, naming its log.
-    Returns each run's status ("reused": done before; "recorded": its result is in ``recorded``, or it is
-    needed only by such runs; "ran", "failed", "blocked") and the seconds of those run.
+    Returns each run's status ("reused": done before; "recorded": its result is in ``recorded``; "not
+    needed": only done or recorded runs need it; "ran", "failed", "blocked") and the seconds of those run.
     """
     to_run = schedule(runs, recorded)
-    status = {run.name: "reused" if is_done(run) else "recorded" for run in runs}
+    status = {run.name: _idle_state(run, recorded) for run in runs}
     seconds: dict[str, float] = {}
     bar = tqdm(to_run, desc=desc, unit="run", file=sys.stdout, dynamic_ncols=True)
     for run in bar:

@@ -322,8 +322,9 @@ def offline_table(
 def raw_table(
     entries: Sequence[EvalEntry], records: Sequence[EvalRecord], labels: Mapping[str, str]
 ) -> list[str]:
-    """One row per evaluation: every record (this folder's and merged ones) with its counts, interval,
-    commit and source, then the planned evaluations not run yet."""
+    """One row per evaluation: every record (this folder's, resumed and merged ones) with its counts,
+    interval, commit and source, then the planned evaluations no record holds (same cell, control and seeds)
+    yet."""
     rows = []
     for r in sorted(records, key=lambda r: (r.key, r.control, r.train_seed or 0, r.eval_seed or 0)):
         model, task, setting = r.key
@@ -332,9 +333,9 @@ def raw_table(
         rows.append(
             [labels.get(model, model), task, setting, *seeds, counts, short_commit(r.commit), f"`{r.source}`"]
         )
-    done = {r.source for r in records}
+    done = {(r.key, r.control, r.train_seed, r.eval_seed) for r in records}
     for e in entries:
-        if str(e.path) not in done:
+        if (e.key, e.control, e.train_seed, e.seed) not in done:
             model, task, setting = e.key
             seeds = [e.control, str(e.train_seed), str(e.seed)]
             rows.append([labels.get(model, model), task, setting, *seeds, MISSING, "", "not run yet"])

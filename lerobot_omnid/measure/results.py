@@ -266,7 +266,8 @@ def write_summary(
     command: Sequence[str],
 ) -> Path:
     """Write a benchmark folder's ``summary.json``: its profile and tasks, the code commit and command that
-    wrote it, and every evaluation record of the folder (only its own, never ones merged from elsewhere)."""
+    wrote it, and every evaluation record of the folder (its own and those resumed from an earlier summary of
+    the same plan, never ones merged with ``--also``)."""
     settings = {"profile": dict(profile), "tasks": list(tasks)}
     return write_run_summary(path, RunSummary(BENCHMARK, settings, records, {}, commit, command))
 
