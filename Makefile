@@ -32,7 +32,7 @@ install: system-deps $(VENV)/.installed
 TEST_WORKERS ?= 2
 
 # The whole suite, tests/e2e (console commands, example scripts) and the slow tests included; what CI runs.
-# Measured on a quiet 2-core machine: 427 s for 845 tests at f2fcddd (750 tests: 362 s at c136c17).
+# Measured on a fresh 2-core machine: 692 s for 941 tests at 5f64d0f (845 tests: 427 s at f2fcddd).
 test: install
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 

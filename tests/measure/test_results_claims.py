@@ -278,6 +278,15 @@ def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
         truth = [n for model in SIX_TASK_METHODS for n in astuple(cells[(model, task, "id")])[:2]]
         if stated != truth:
             errors.append(f"headline: six tasks, {task}: stated {stated}, the summary gives {truth}")
+    text = " ".join(headline_section(readme).split())
+    for task in re.findall(r"on `(\w+)` none is above its blind control", text):
+        cells, blind = collect(records), collect(records, "blind")
+        for model in SIX_TASK_METHODS:
+            ours, control = cells[(model, task, "id")], blind[(model, task, "id")]
+            if ours.successes / ours.episodes > control.successes / control.episodes and (
+                fisher_exact(ours.successes, ours.episodes, control.successes, control.episodes) < 0.05
+            ):
+                errors.append(f"headline: on {task} {model} is above its blind control")
     return errors
 
 
@@ -285,8 +294,12 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     records = load([SIX_TASKS_SUMMARY])
     readme = README.read_text()
     assert six_task_errors(readme, records) == []
-    edited = readme.replace("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30")
-    assert edited != readme and len(six_task_errors(edited, records)) == 1
+    for old, new in (
+        ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
+        ("on `add_condiment` none", "on `select_apple` none"),  # OmniD, DP and ACT are above theirs there
+    ):
+        edited = readme.replace(old, new)
+        assert edited != readme and six_task_errors(edited, records) != []
 
 
 @pytest.fixture(scope="module")
