@@ -24,6 +24,7 @@ from lerobot_omnid.measure.report import (
     format_p,
     format_rate,
     markdown_table,
+    p_phrase,
     pooled,
 )
 from lerobot_omnid.measure.results import CellResult, EvalRecord, Key, collect
@@ -193,12 +194,12 @@ def pooled_comparison(
             d = sum(s1 / n1 - s2 / n2 for s1, n1, s2, n2 in ranged) / len(ranged)
             p = mantel_haenszel(ranged)
             holds = holds and p < ALPHA and d * difference.value > 0
-            text.append(f"{100 * d:+.1f}, p = {format_p(p)}")
+            text.append(f"{100 * d:+.1f}, {p_phrase(p)}")
         text.append("yes" if holds else "no")
         text.append(", ".join(f"{100 * (s1 / n1 - s2 / n2):+.0f}" for s1, n1, s2, n2 in strata))
         if len(strata) > 1:
             h = heterogeneity(strata)
-            text.append(f"Q = {h.q:.1f} ({h.df} df), p = {format_p(h.p)}, I² = {100 * h.i2:.0f} %")
+            text.append(f"Q = {h.q:.1f} ({h.df} df), {p_phrase(h.p)}, I² = {100 * h.i2:.0f} %")
         else:
             text.append(MISSING)
         rows.append(text)

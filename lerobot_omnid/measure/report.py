@@ -55,6 +55,12 @@ def format_p(p: float) -> str:
     return f"{p:.2g}" if p >= 1e-4 else "<0.0001"
 
 
+def p_phrase(p: float) -> str:
+    """``p = 0.039`` or ``p < 0.0001``, for a p-value inside a sentence or beside other numbers."""
+    text = format_p(p)
+    return f"p < {text[1:]}" if text.startswith("<") else f"p = {text}"
+
+
 def short_commit(commit: str | None) -> str:
     """A commit's first 12 hex digits, its ``+dirty`` mark kept; ``?`` when not recorded."""
     if commit is None:
