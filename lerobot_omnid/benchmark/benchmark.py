@@ -174,19 +174,19 @@ def main(argv: list[str] | None = None) -> int:
             f"{args.task_steps} (a task still being sized: plan the others with --tasks)"
         )
     out = (args.out or Path(f"outputs/benchmark_{p.name}")).resolve()
-    for path in args.also:  # before running anything: a summary that cannot be combined is an error now
+
+    def comparable_records(path: Path, option: str) -> list[results.EvalRecord]:
+        """The evaluations of a summary of this same experiment; otherwise an error naming ``option``."""
         try:
-            profile, _ = results.read_summary(path)
+            profile, records = results.read_summary(path)
             results.check_comparable(dataclasses.asdict(p), profile, str(path))
         except ValueError as e:
-            parser.error(f"--also: {e}")
-    resumed: list[results.EvalRecord] = []
-    if args.resume_from:
-        try:
-            profile, resumed = results.read_summary(args.resume_from)
-            results.check_comparable(dataclasses.asdict(p), profile, str(args.resume_from))
-        except ValueError as e:
-            parser.error(f"--resume-from: {e}")
+            parser.error(f"{option}: {e}")
+        return records
+
+    for path in args.also:  # before running anything: a summary that cannot be combined is an error now
+        comparable_records(path, "--also")
+    resumed = comparable_records(args.resume_from, "--resume-from") if args.resume_from else []
     commit = code_commit()
     command = ["omnid-benchmark", *(sys.argv[1:] if argv is None else argv)]
     runs = build_plan(p, out, tasks)
@@ -199,9 +199,9 @@ def main(argv: list[str] | None = None) -> int:
     todo = len(to_run)
     stale = sum(state(r) == "stale" for r in to_run)
     redo = f" ({stale} made for another plan: rerun)" if stale else ""
-    kept = sum(r.kind == "eval" and r.fingerprint in recorded for r in runs)
+    n_kept = sum(r.kind == "eval" and r.fingerprint in recorded for r in runs)
     unplanned = len(recorded - {r.fingerprint for r in runs})
-    kept = f", {kept} evaluations kept from {args.resume_from}" if args.resume_from else ""
+    kept = f", {n_kept} evaluations kept from {args.resume_from}" if args.resume_from else ""
     if unplanned:  # e.g. other tasks: not in this folder's summary.json, keep the file they are in
         kept += f" ({unplanned} of its evaluations are not in this plan and not in this folder's summary)"
     print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}{kept}; {out}")

@@ -301,9 +301,10 @@ def write_summary(
     the planned evaluations not done here. Returns every planned evaluation and the records of the done."""
     evaluations = [r for r in runs if r.kind == "eval"]
     entries = [eval_entry(r) for r in evaluations]
-    own = [results.record_of(e) for e, r in zip(entries, evaluations, strict=True) if is_done(r)]
-    kept = {r.fingerprint for r in evaluations if not is_done(r)}
-    own += [r for r in resumed if r.fingerprint in kept]
+    done = [is_done(r) for r in evaluations]
+    own = [results.record_of(e) for e, made in zip(entries, done, strict=True) if made]
+    missing = {r.fingerprint for r, made in zip(evaluations, done, strict=True) if not made}
+    own += [r for r in resumed if r.fingerprint in missing]
     out.mkdir(parents=True, exist_ok=True)
     results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
     return entries, own

@@ -68,10 +68,13 @@ def _paired(
     method: str,
     task: str,
     setting: str,
+    control_setting: str | None = None,
 ) -> list[tuple[int, int, int, int]]:
     """``[(successes, episodes, control's successes, control's episodes)]`` of ``method`` on ``task`` in
-    ``setting``, or ``[]`` where either is missing."""
-    a, b = cells.get((method, task, setting)), controlled.get((method, task, setting))
+    ``setting`` (the control's in ``control_setting``, default the same), or ``[]`` where either is
+    missing."""
+    a = cells.get((method, task, setting))
+    b = controlled.get((method, task, control_setting or setting))
     return [(a.successes, a.episodes, b.successes, b.episodes)] if a and b else []
 
 
@@ -128,11 +131,7 @@ def task_table(
         text += [format_counts(c) if (c := total(by_control[k])) else MISSING for k in controls]
         if unseen is not None:
             # Its blind control is the ID one: the same env seeds, and a blind policy sees no table.
-            unseen_blind = [
-                (a.successes, a.episodes, b.successes, b.episodes)
-                for t in pick
-                if (a := cells.get((method, t, unseen))) and (b := controlled.get((method, t, setting)))
-            ]
+            unseen_blind = [c for t in pick for c in _paired(cells, controlled, method, t, unseen, setting)]
             text.append(_marked(total(cells, unseen), unseen_blind))
         if base is None:
             return text

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 
+from lerobot_omnid.measure.across_tasks import above
 from lerobot_omnid.measure.results import EvalRecord, check_comparable, collect, merge, read_summary
 from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
 
@@ -282,10 +283,7 @@ def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
     for task in re.findall(r"on `(\w+)` none is above its blind control", text):
         cells, blind = collect(records), collect(records, "blind")
         for model in SIX_TASK_METHODS:
-            ours, control = cells[(model, task, "id")], blind[(model, task, "id")]
-            if ours.successes / ours.episodes > control.successes / control.episodes and (
-                fisher_exact(ours.successes, ours.episodes, control.successes, control.episodes) < 0.05
-            ):
+            if above(cells[(model, task, "id")], blind[(model, task, "id")]):
                 errors.append(f"headline: on {task} {model} is above its blind control")
     return errors
 
