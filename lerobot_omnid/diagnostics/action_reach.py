@@ -13,7 +13,7 @@ policy, no training) leaves the range, and by how far.
 
 Layouts from env seed ``REACH_SEED``, disjoint from every other seed set of the benchmark. Writes
 ``<out>/summary.json`` (the run summary every protocol writes; the counts under ``results``, the commit) and
-``<out>/report.md``; ``--report-only SUMMARY`` rebuilds the report from such a file alone.
+``<out>/report.md``; ``--report-only SUMMARY...`` rebuilds the report from such files alone.
 """
 
 from __future__ import annotations
@@ -88,25 +88,29 @@ def reach(task: str, layout: str, episodes: int, low: np.ndarray, high: np.ndarr
     }
 
 
-def write_report(summary: RunSummary, path: Path) -> None:
-    s = summary.settings
-    lines = [
-        f"# Action reach: {s['task']}, training actions of {s['dataset']}, "
-        f"clip_sample_range {s['clip_range']}",
-        "",
-        "| layout | expert plans leaving the generable range (Wilson 95 %) | dims "
-        "| position excess, median / max (cm) |",
-        "|---|---|---|---|",
-    ]
-    for layout, r in summary.results["layouts"].items():
-        est = wilson_interval(r["beyond"], r["episodes"])
-        dims = ", ".join(f"{name} {n}" for name, n in r["beyond_by_dim"].items()) or "-"
-        lines.append(
-            f"| {layout} | {r['beyond']}/{r['episodes']} = {100 * est.value:.1f} % ({100 * est.low:.1f}-"
-            f"{100 * est.high:.1f}) | {dims} | {r['median_position_excess_cm']:.1f} / "
-            f"{r['max_position_excess_cm']:.1f} |"
-        )
-    write_markdown(lines, path)
+def write_report(summaries: list[RunSummary], path: Path) -> None:
+    """One table per summary (a clip range, a dataset), written to ``path`` and printed."""
+    lines = []
+    for summary in summaries:
+        s = summary.settings
+        lines += [
+            f"# Action reach: {s['task']}, training actions of {s['dataset']}, "
+            f"clip_sample_range {s['clip_range']} ({summary.commit})",
+            "",
+            "| layout | expert plans leaving the generable range (Wilson 95 %) | dims "
+            "| position excess, median / max (cm) |",
+            "|---|---|---|---|",
+        ]
+        for layout, r in summary.results["layouts"].items():
+            est = wilson_interval(r["beyond"], r["episodes"])
+            dims = ", ".join(f"{name} {n}" for name, n in r["beyond_by_dim"].items()) or "-"
+            lines.append(
+                f"| {layout} | {r['beyond']}/{r['episodes']} = {100 * est.value:.1f} % ({100 * est.low:.1f}-"
+                f"{100 * est.high:.1f}) | {dims} | {r['median_position_excess_cm']:.1f} / "
+                f"{r['max_position_excess_cm']:.1f} |"
+            )
+        lines.append("")
+    write_markdown(lines[:-1], path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,14 +123,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--layouts", default=",".join(LAYOUTS[:1] + LAYOUTS[2:]))
     parser.add_argument("--episodes", type=int, default=200, help="layouts examined per layout kind")
     parser.add_argument("--clip-range", type=float, default=1.0, help="the policy's clip_sample_range")
-    parser.add_argument("--report-only", type=Path, metavar="SUMMARY", help="rebuild report.md from it")
+    parser.add_argument(
+        "--report-only", nargs="+", type=Path, metavar="SUMMARY", help="rebuild report.md from these"
+    )
     args = parser.parse_args(argv)
     if args.report_only:
         try:
-            summary = read_run_summary(args.report_only, PROTOCOL)
+            summaries = [read_run_summary(path, PROTOCOL) for path in args.report_only]
         except ValueError as e:
             parser.error(f"--report-only: {e}")
-        write_report(summary, args.out / "report.md")
+        write_report(summaries, args.out / "report.md")
         return 0
     stats_path = args.dataset / "meta" / "stats.json" if args.dataset else None
     if stats_path is None or not stats_path.is_file():
@@ -154,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args.out.mkdir(parents=True, exist_ok=True)
     write_run_summary(args.out / SUMMARY, summary)
-    write_report(summary, args.out / "report.md")
+    write_report([summary], args.out / "report.md")
     return 0
 
 
