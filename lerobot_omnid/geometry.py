@@ -296,6 +296,19 @@ def perturb_extrinsics(cam_T_world: Tensor, rotation: Tensor, translation_m: Ten
     return delta @ cam_T_world
 
 
+def translate_world(cam_T_world: Tensor, shift_m: Tensor) -> Tensor:
+    """The same cameras in a world where everything, cameras included, moved by ``shift_m``: a point
+    ``p + shift_m`` is seen where ``p`` was, i.e. ``cam_T_world @ T(-shift_m)``; the images stay true.
+
+    Args:
+        cam_T_world: (..., 4, 4).
+        shift_m: (..., 3) metres, world frame.
+    """
+    back = torch.eye(4, dtype=cam_T_world.dtype, device=cam_T_world.device).expand_as(cam_T_world).clone()
+    back[..., :3, 3] = -shift_m
+    return cam_T_world @ back
+
+
 def perturb_intrinsics(pix_T_cam: Tensor, focal_scale: Tensor, principal_shift_px: Tensor) -> Tensor:
     """``fx, fy`` (and the skew) times ``focal_scale`` (...,), the principal point moved by
     ``principal_shift_px`` (..., 2). ``pix_T_cam``: (..., 3, 3)."""

@@ -16,6 +16,7 @@ from lerobot_omnid.geometry import (
     pixels_to_grid,
     project_to_grid,
     project_to_pixels,
+    translate_world,
 )
 
 K = torch.tensor([[100.0, 0.0, 50.0], [0.0, 120.0, 40.0], [0.0, 0.0, 1.0]])
@@ -159,3 +160,17 @@ def test_clamp_to_feature_cells_moves_only_the_image_margin_beyond_the_cells():
     # An offset moves the span of the cells with it.
     shifted = clamp_to_feature_cells(torch.tensor([[1.0, 90.0]]), (96, 96), (3, 3), stride=32, offset=4.0)
     assert torch.equal(shifted, torch.tensor([[4.0, 68.0]]))
+
+
+def test_translate_world_sees_the_moved_point_where_the_old_one_was():
+    cam_T_world = look_at(torch.tensor([1.0, -0.5, 0.8]), torch.tensor([0.5, 0.0, 0.0]))
+    points = torch.tensor([[0.5, 0.0, 0.0], [0.6, 0.1, 0.05], [0.4, -0.2, 0.2]])
+    shift = torch.tensor([0.03, -0.07, 0.0])
+    moved = translate_world(cam_T_world, shift)
+    assert torch.allclose(
+        apply_transform(moved, points + shift), apply_transform(cam_T_world, points), atol=1e-6
+    )
+    # The camera itself moved by the shift: its centre in the world is the old one plus the shift.
+    assert torch.allclose(camera_centers_world(moved), camera_centers_world(cam_T_world) + shift, atol=1e-6)
+    batch = translate_world(cam_T_world.expand(2, 3, 4, 4), torch.zeros(2, 3, 3))  # (..., 4, 4) batches
+    assert torch.allclose(batch, cam_T_world.expand(2, 3, 4, 4))

@@ -38,6 +38,7 @@ OFG_ONLY_OPTIONS = {
     "calibration_noise_principal_px": 0.0,
     "camera_dropout": 0.0,
     "single_camera_rate": 0.0,
+    "position_shift_m": 0.0,
 }
 """Training augmentations that act in the OFG's path, each with the value that turns it off."""
 
@@ -137,6 +138,16 @@ class OmniDConfig(PreTrainedConfig):
         single_camera_rate: Training-time share of samples that keep exactly one camera, drawn uniformly
             (after ``camera_dropout``): the OFG must then lift the scene from a single view, as it must for
             a new camera seen alone. 0: off; 1: every sample one camera.
+        position_shift_m: Training-time translation of the whole scene (0: off): per sample a planar shift
+            ``d``, uniform in ``[-position_shift_m, position_shift_m]`` metres along world x and y, moves the
+            cameras' extrinsics, the state's and the action's TCP position together (robot, objects and
+            cameras translated: the images stay true), so the head learns that an object seen ``d``
+            farther needs a TCP target ``d`` farther. For absolute world-frame TCP actions (the omnid
+            envs'); the state's joint angles do not move with it. The head must be able to command the
+            shifted targets: with ``clip_sample`` the policy refuses a ``clip_sample_range`` that clips them
+            (checked against the dataset's statistics when it is made for training).
+        state_position_dims, action_position_dims: Indices of the TCP's world x and y in
+            ``observation.state`` and ``action``, for ``position_shift_m`` (the omnid envs': 0 and 1).
         fuse_last_step_only: Only the last observation step's images go through the backbone and the OFG
             (as in the authors' code); the state still conditions with all ``n_obs_steps``. Encoding
             costs 1 / n_obs_steps as much; what the head loses is the image history.
@@ -227,6 +238,9 @@ class OmniDConfig(PreTrainedConfig):
     calibration_noise_principal_px: float = 0.0
     camera_dropout: float = 0.0
     single_camera_rate: float = 0.0
+    position_shift_m: float = 0.0
+    state_position_dims: tuple[int, int] = (0, 1)
+    action_position_dims: tuple[int, int] = (0, 1)
     fuse_last_step_only: bool = False
 
     # Omni-Feature Generator.
@@ -351,6 +365,15 @@ class OmniDConfig(PreTrainedConfig):
             raise ValueError(
                 f"`single_camera_rate`: expected a share in [0, 1], got {self.single_camera_rate}"
             )
+        if not self.position_shift_m >= 0:
+            raise ValueError(
+                f"`position_shift_m`: expected a half-width >= 0 (m), got {self.position_shift_m}"
+            )
+        for name in ("state_position_dims", "action_position_dims"):
+            dims = tuple(getattr(self, name))
+            if len(dims) != 2 or len(set(dims)) != 2 or not all(isinstance(i, int) and i >= 0 for i in dims):
+                raise ValueError(f"`{name}`: expected two distinct indices >= 0 (x, y), got {dims}")
+            setattr(self, name, dims)
         if not self.use_ofg:
             for name, off in OFG_ONLY_OPTIONS.items():
                 if getattr(self, name) != off:
@@ -516,6 +539,17 @@ class OmniDConfig(PreTrainedConfig):
                 f"(the dataset's `{CAMERA_VISIBLE_KEY}` column): the 'w/o OFG' ablation concatenates every "
                 f"camera's features in a fixed order and cannot leave a hidden camera out"
             )
+        if self.position_shift_m > 0:
+            shifted = {
+                "state_position_dims": self.robot_state_feature,
+                "action_position_dims": self.action_feature,
+            }
+            for name, feature in shifted.items():
+                if feature is not None and max(getattr(self, name)) >= feature.shape[0]:
+                    raise ValueError(
+                        f"`{name}`: expected indices below the feature's {feature.shape[0]} entries, got "
+                        f"{getattr(self, name)}"
+                    )
         if not self.use_ofg:
             shapes = {ft.shape for ft in self.image_features.values()}
             if len(shapes) > 1:

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from diffusers.schedulers.scheduling_ddim import DDIMScheduler
 from diffusers.schedulers.scheduling_ddpm import DDPMScheduler
 from huggingface_hub import ModelCard
+from lerobot.configs.types import NormalizationMode
 from lerobot.policies.diffusion.modeling_diffusion import DiffusionConditionalUnet1d, SpatialSoftmax
 from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.policies.utils import get_output_shape, populate_queues
@@ -43,6 +44,7 @@ from lerobot_omnid.geometry import (
     perturb_extrinsics,
     perturb_intrinsics,
     resize_intrinsics,
+    translate_world,
 )
 from lerobot_omnid.policy.backbone import ResNetFeatures
 from lerobot_omnid.policy.configuration_omnid import OmniDConfig
@@ -110,6 +112,26 @@ def _frame_name(batch: Mapping[str, Tensor], index: tuple[int, ...], lead: torch
     return ", ".join(parts)
 
 
+def normalised_per_metre(stats: Mapping[str, Tensor] | None, dims: tuple[int, ...], mode) -> Tensor | None:
+    """(len(dims),) normalised units per metre of a feature's ``dims`` under its normalisation ``mode``
+    (LeRobot's: MIN_MAX maps ``[min, max]`` to ``[-1, 1]``, MEAN_STD divides by ``std``), from its dataset
+    ``stats``; None without stats."""
+    if mode is NormalizationMode.IDENTITY:
+        return torch.ones(len(dims))
+    if stats is None:
+        return None
+    index = list(dims)
+    if mode is NormalizationMode.MIN_MAX:
+        width = (
+            torch.as_tensor(stats["max"], dtype=torch.float32)[index]
+            - torch.as_tensor(stats["min"], dtype=torch.float32)[index]
+        )
+        return 2 / width.clamp(min=1e-8)
+    if mode is NormalizationMode.MEAN_STD:
+        return 1 / torch.as_tensor(stats["std"], dtype=torch.float32)[index].clamp(min=1e-8)
+    raise ValueError(f"`position_shift_m`: expected MIN_MAX, MEAN_STD or IDENTITY normalisation, got {mode}")
+
+
 def _sample_visibility(visible: Tensor) -> Tensor:
     """(B, T, S) cameras each observation step shows -> (B, S) cameras each sample fuses: those that every
     step shows. One set per sample, as camera dropout draws it: every step's plane is lifted from the same
@@ -140,12 +162,17 @@ class OmniDPolicy(PreTrainedPolicy):
     name = "omnid"
 
     def __init__(self, config: OmniDConfig, **kwargs) -> None:
-        """``kwargs`` (``dataset_stats``, ``dataset_meta`` from ``make_policy``) are not needed: normalisation
-        lives in the processors and calibration in the config."""
+        """``kwargs``: ``dataset_stats`` (from ``make_policy``) gives ``position_shift_m`` its metres in
+        normalised units; otherwise normalisation lives in the processors and calibration in the config."""
         super().__init__(config)
         config.validate_features()
         self.config = config
         self.model = OmniDModel(config)
+        # position_shift_m in the normalised units of the state's and the action's TCP x, y (empty: unknown).
+        self.register_buffer("state_shift_scale", torch.zeros(0), persistent=False)
+        self.register_buffer("action_shift_scale", torch.zeros(0), persistent=False)
+        if config.position_shift_m > 0:
+            self._set_shift_scales(kwargs.get("dataset_stats"))
         # The cameras' matrices for the backbone's input size: parsed from the config once, kept as buffers
         # (they follow .to(device); not saved, config.json holds the calibration), rebuilt only when the
         # calibration, the cameras or the input size change.
@@ -474,6 +501,65 @@ class OmniDPolicy(PreTrainedPolicy):
             box = box[:, None]  # B, 1, S, 4: one crop for every observation step
         return x.view_as(images), crop_intrinsics(pix_T_cam, box, input_hw)
 
+    def _set_shift_scales(self, stats: Mapping[str, Mapping[str, Tensor]] | None) -> None:
+        """``position_shift_m``'s units per metre of state and action, and the check that the clipped head
+        can still command the shifted action targets."""
+        c = self.config
+        modes = c.normalization_mapping
+        state = normalised_per_metre(
+            stats.get(OBS_STATE) if stats else None, c.state_position_dims, NormalizationMode(modes["STATE"])
+        )
+        action = normalised_per_metre(
+            stats.get(ACTION) if stats else None, c.action_position_dims, NormalizationMode(modes["ACTION"])
+        )
+        if state is None or action is None:
+            return  # a policy loaded for inference: the shift is a training option
+        self.state_shift_scale, self.action_shift_scale = state, action
+        reach = 1 + c.position_shift_m * float(action.max())
+        clipped = NormalizationMode(modes["ACTION"]) is NormalizationMode.MIN_MAX and c.clip_sample
+        if clipped and c.clip_sample_range < reach:
+            raise ValueError(
+                f"`position_shift_m` = {c.position_shift_m} m moves the normalised action's x, y by up "
+                f"to {reach - 1:.2f} (this dataset's action range), beyond `clip_sample_range` = "
+                f"{c.clip_sample_range}: the head could never command the shifted targets near the "
+                f"range's edges; set clip_sample_range >= {reach:.2f} (or clip_sample=false)"
+            )
+
+    def _shift_positions(
+        self, stacked: dict[str, Tensor], actions: Tensor, shift_xy: Tensor | None = None
+    ) -> tuple[dict[str, Tensor], Tensor]:
+        """``position_shift_m``: the whole scene translated by a planar shift per sample.
+
+        Args:
+            stacked: the stacked inputs, state (B, T, Ds) normalised and cam_T_world (B, T, S, 4, 4).
+            actions: (B, horizon, Da), normalised.
+            shift_xy: (B, 2) metres along world x, y; None draws it uniformly in +-``position_shift_m``.
+        Returns:
+            ``stacked`` with its state's TCP x, y and its cameras moved by the shift, and the actions' TCP
+            x, y moved by it.
+        """
+        if self.action_shift_scale.numel() == 0:
+            raise ValueError(
+                "`position_shift_m` > 0 needs the dataset's statistics to convert metres to normalised "
+                "units: make the policy with `dataset_stats` (lerobot-train's make_policy passes them)"
+            )
+        B = actions.shape[0]
+        if shift_xy is None:
+            shift_xy = (torch.rand(B, 2, device=actions.device) * 2 - 1) * self.config.position_shift_m
+        stacked = dict(stacked)
+        state = stacked[OBS_STATE].clone()
+        state[..., list(self.config.state_position_dims)] += shift_xy[:, None] * self.state_shift_scale
+        stacked[OBS_STATE] = state
+        actions = actions.clone()
+        actions[..., list(self.config.action_position_dims)] += shift_xy[:, None] * self.action_shift_scale
+        cam_T_world = stacked[FRAME_MATRICES[1]]
+        shift = F.pad(shift_xy, (0, 1)).to(cam_T_world.dtype)  # B, 3: nothing moves in z
+        lead = (B,) + (1,) * (cam_T_world.ndim - 3)
+        stacked[FRAME_MATRICES[1]] = translate_world(
+            cam_T_world, shift.view(*lead, 3).expand(*cam_T_world.shape[:-2], 3)
+        )
+        return stacked, actions
+
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], noise: Tensor | None = None) -> Tensor:
         """Predict ``n_action_steps`` actions (B, n_action_steps, Da) from the queued observations, or from
@@ -508,8 +594,11 @@ class OmniDPolicy(PreTrainedPolicy):
         if ACTION not in batch:
             raise KeyError(f"`{ACTION}` is missing from the training batch (keys: {sorted(batch)})")
         pad = batch.get("action_is_pad") if self.config.do_mask_loss_for_padding else None
+        actions = batch[ACTION]
+        if self.training and self.config.position_shift_m > 0:
+            stacked, actions = self._shift_positions(stacked, actions)
         condition = self._condition(stacked, augment=self.training)
-        return self.model.compute_loss(condition, batch[ACTION], pad), None
+        return self.model.compute_loss(condition, actions, pad), None
 
 
 class OmniDModel(nn.Module):
