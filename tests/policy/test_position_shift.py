@@ -4,7 +4,8 @@ together, so the TCP stays where every camera sees it; metres become normalised 
 import pytest
 import torch
 from gym_omnid import ACTION_DIM, STATE_DIM
-from omnid_testing import random_batch, tiny_config
+from lerobot.policies.factory import make_policy
+from omnid_testing import make_tiny_dataset, random_batch, tiny_config
 
 from lerobot_omnid.geometry import apply_transform, project_to_pixels
 from lerobot_omnid.policy.modeling_omnid import FRAME_MATRICES, OmniDPolicy
@@ -108,3 +109,13 @@ def test_without_stats_the_policy_loads_but_cannot_train_with_a_shift(tmp_path):
 def test_bad_shift_options_name_the_field(overrides, message):
     with pytest.raises(ValueError, match=message):
         OmniDPolicy(tiny_config(**overrides))
+
+
+def test_make_policy_gives_the_shift_the_datasets_statistics(tmp_path):
+    dataset = make_tiny_dataset(tmp_path / "data", cams=("cam_b",), size=32, episodes=1, frames=4)
+    config = tiny_config(cams=("cam_b",), size=32, position_shift_m=0.01, clip_sample=False)
+    policy = make_policy(config, ds_meta=dataset.meta)
+    action = dataset.meta.stats["action"]
+    expected = 2 / (torch.as_tensor(action["max"][:2]) - torch.as_tensor(action["min"][:2])).float()
+    assert torch.allclose(policy.action_shift_scale, expected)
+    assert policy.state_shift_scale.shape == (2,)
