@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -39,6 +40,24 @@ VQBET_CAMERA = ("cam_b",)  # LeRobot's VQ-BeT takes exactly one image
 
 Flag = tuple[str, str]
 """A command-line option and why it is set."""
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A method trained with other options on task 0 and evaluated like it, under its own table row: an
+    option chosen on validation (:func:`variant_flags`)."""
+
+    name: str  # its table row, e.g. "omnid_clip2"
+    method: str
+    label: str  # e.g. "OmniD clip 2"
+    flags: tuple[Flag, ...]  # replace the method's option of the same name, or add to them
+
+
+def with_options(base: Sequence[Flag], changes: Sequence[Flag]) -> list[Flag]:
+    """``base`` with each option of ``changes`` replacing the one of the same name (``--policy.x=``), the
+    new ones appended."""
+    names = {flag.split("=", 1)[0] for flag, _ in changes}
+    return [item for item in base if item[0].split("=", 1)[0] not in names] + list(changes)
 
 
 def input_features(cameras: Sequence[str], image_size: int, state_dim: int = STATE_DIM) -> str:
@@ -202,6 +221,41 @@ def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
             flags.append(("--policy.n_vqvae_training_steps=0", why))
         return flags
     raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
+
+
+WIDE_CLIP: Flag = (
+    "--policy.clip_sample_range=2.0",
+    "the head's clean-sample clip at twice the training actions' range: at 1.0 (the default) it cannot "
+    "command a TCP target outside the training actions' range, which most position-band layouts need "
+    "(python -m lerobot_omnid.diagnostics.action_reach)",
+)
+POSITION_VARIANTS = (
+    Variant("omnid_clip2", "omnid", "OmniD clip 2", (WIDE_CLIP,)),
+    *(
+        Variant(
+            f"omnid_clip2_shift{cm}",
+            "omnid",
+            f"OmniD clip 2, shift {cm} cm",
+            (
+                WIDE_CLIP,
+                (
+                    f"--policy.position_shift_m={cm / 100:g}",
+                    f"the whole scene shifted by up to {cm} cm in x and y per training sample (cameras, "
+                    "state and action together): the head sees objects and targets beyond the square",
+                ),
+            ),
+        )
+        for cm in (5, 10)
+    ),
+    Variant("diffusion_clip2", "diffusion", "DP clip 2", (WIDE_CLIP,)),
+)
+"""The position validation's candidates beside OmniD and DP as trained
+(docs/benchmark.md#position-its-protocol)."""
+
+
+def variant_flags(variant: Variant, p: BenchmarkProfile) -> list[Flag]:
+    """Options of ``variant``: its method's, with its own options replacing or added to them."""
+    return with_options(method_flags(variant.method, p), variant.flags)
 
 
 def ablation_flags(name: str, p: BenchmarkProfile) -> list[Flag]:

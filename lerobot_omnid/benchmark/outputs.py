@@ -33,7 +33,6 @@ from lerobot_omnid.benchmark.plan import (
     FEWSHOT,
     FEWSHOT_SEED,
     HELDOUT_SEED,
-    LABELS,
     MULTITASK,
     MULTITASK_METHODS,
     OFFLINE_OUTPUT,
@@ -47,6 +46,7 @@ from lerobot_omnid.benchmark.plan import (
     multitask_steps,
     seed_folder,
 )
+from lerobot_omnid.benchmark.variant_selection import selection_lines
 from lerobot_omnid.measure import across_tasks, charts, report, results
 from lerobot_omnid.measure.across_tasks import ALPHA, NOT_ABOVE_BLIND
 from lerobot_omnid.measure.engine import Run, is_done, portable_command, stamp_commit
@@ -74,6 +74,7 @@ def steps_text(p: BenchmarkProfile) -> str:
 
 def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
     """What is run and how, with every non-default option and its reason."""
+    labels = p.labels
     evals = ", ".join(f"{k} (env seeds {k * EVAL_SEED_STRIDE}+)" for k in p.eval_seeds)
     where = "every task" if p.every_task else TASK0
     parts = [f"settings {', '.join(p.settings)} on {where}"]
@@ -81,7 +82,7 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
     parts += ["ablations"] if p.ablations else []
     folders = ", ".join(f"{s} (runs in `./{seed_folder(Path(), s)[1]}`)" for s in p.train_seeds)
     lines = [
-        f"Profile `{p.name}` on `{p.device}`: methods {', '.join(LABELS[m] for m in p.methods)}; "
+        f"Profile `{p.name}` on `{p.device}`: methods {', '.join(labels[m] for m in p.methods)}; "
         f"tasks {', '.join(tasks)}; {', '.join(parts)}.",
         "",
         f"- Same for every method: datasets of {p.episodes} expert episodes per task (cameras B-E, "
@@ -125,19 +126,23 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         "| Method | Option | Why |",
         "| --- | --- | --- |",
     ]
-    rows = [(LABELS[m], f, why) for m in p.methods for f, why in method_flags(m, p)]
+    rows = [(labels[m], f, why) for m in p.methods for f, why in method_flags(m, p)]
     if p.control_settings:
         for m in p.methods:
             cameras = VQBET_CAMERA if m == "vqbet" else TRAIN_CAMERAS
             for control in (c for c in method_controls(m) if c in p.controls):
                 flags = control_flags(m, control, cameras, "<control calibration file>")
-                rows += [(f"{LABELS[m]} {CONTROL_LABELS[control]}", f, why) for f, why in flags]
+                rows += [(f"{labels[m]} {CONTROL_LABELS[control]}", f, why) for f, why in flags]
     if p.ablations:
         base = {f for f, _ in method_flags("omnid", p)}
-        rows += [(LABELS[a], f, why) for a in ABLATIONS for f, why in ablation_flags(a, p) if f not in base]
+        rows += [(labels[a], f, why) for a in ABLATIONS for f, why in ablation_flags(a, p) if f not in base]
+    seen: set[tuple[str, str]] = set()
+    for v in p.variants:
+        rows += [(v.label, f, "as above" if (f, why) in seen else why) for f, why in v.flags]
+        seen.update(v.flags)
     if p.fewshot:
         for m in p.methods:
-            rows += [(f"{LABELS[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
+            rows += [(f"{labels[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
     lines += [f"| {who} | `{flag}` | {why} |" for who, flag, why in rows]
     notes = {
         "act": "ACT: one observation step (the only value LeRobot's ACT supports); without pretrained "
@@ -165,13 +170,18 @@ def eval_entry(run: Run) -> results.EvalEntry:
 
 
 def ordered_models(p: BenchmarkProfile, records: Sequence[results.EvalRecord]) -> tuple[str, ...]:
-    """The profile's methods and any other method found in merged records, in the paper's order."""
+    """The profile's methods and any other method found in merged records, in the paper's order, each
+    followed by the profile's variants of it."""
     found = {r.key[0] for r in records}
-    return tuple(m for m in METHODS if m in p.methods or m in found)
+    models = []
+    for m in METHODS:
+        models += [m] if m in p.methods or m in found else []
+        models += [v.name for v in p.variants if v.method == m]
+    return tuple(models)
 
 
 def comparison_lines(
-    records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str]
+    records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str], labels: Mapping[str, str]
 ) -> list[str]:
     """OmniD against every other method, cell by cell, with Fisher tests (pooled and per training seed)."""
     cells = [(t, s) for t in tasks if t != TASK0 for s in SETTINGS]
@@ -184,18 +194,20 @@ def comparison_lines(
         "Episodes pooled over eval and training seeds; difference with Newcombe's 95 % interval (pp); "
         "two-sided Fisher exact test.",
         "",
-        *report.comparison_table(records, "omnid", others, cells, LABELS),
+        *report.comparison_table(records, "omnid", others, cells, labels),
     ]
 
 
-def fewshot_control_lines(records: Sequence[results.EvalRecord], methods: Sequence[str]) -> list[str]:
+def fewshot_control_lines(
+    records: Sequence[results.EvalRecord], methods: Sequence[str], labels: Mapping[str, str]
+) -> list[str]:
     """Each fine-tuned camera-A model against its own blind control, per task (none if not evaluated)."""
     tasks = [t for t in (TASK0, TASK1) if any(r.control and r.key[1:] == (t, FEWSHOT) for r in records)]
     lines = []
     for task in tasks:
         lines += ["", f"## Few-shot on camera A, {task}: each fine-tuned model against its blind control", ""]
         lines += report.controls_table(
-            records, methods, task, (FEWSHOT,), {(FEWSHOT, "blind"): FEWSHOT}, LABELS, {"blind": "blind"}
+            records, methods, task, (FEWSHOT,), {(FEWSHOT, "blind"): FEWSHOT}, labels, {"blind": "blind"}
         )
     return lines
 
@@ -205,6 +217,7 @@ def every_task_lines(
 ) -> list[str]:
     """Every task with every method beside its controls and per range of env seeds; OmniD against each
     method over the tasks."""
+    labels = p.labels
     unseen = next((s for s in p.settings if s in BACKGROUND_OODS), None)
     lines = [
         "",
@@ -217,12 +230,12 @@ def every_task_lines(
         "stratified by task).",
         "",
         *across_tasks.task_table(
-            records, methods, tasks, LABELS, setting="id", unseen=unseen, controls=p.controls
+            records, methods, tasks, labels, setting="id", unseen=unseen, controls=p.controls
         ),
     ]
     if "omnid" in methods and len(methods) > 1 and len(tasks) > 1:
         lines += ["", "## OmniD against each method over the tasks", ""]
-        lines += across_tasks.pooled_comparison(records, methods, tasks, LABELS)
+        lines += across_tasks.pooled_comparison(records, methods, tasks, labels)
     paper = [t for t in tasks if t in PAPER_TABLE_1]
     if paper:
         lines += [
@@ -231,7 +244,7 @@ def every_task_lines(
             "the six tasks at 480 px, 100k training steps on a GPU; here 50 episodes a task at "
             f"{p.image_size} px and {steps_text(p)} CPU steps):",
             "",
-            "| Task | " + " | ".join(LABELS[m] for m in methods) + " |",
+            "| Task | " + " | ".join(labels[m] for m in methods) + " |",
             "| --- |" + " --- |" * len(methods),
         ]
         for t in paper:
@@ -249,15 +262,18 @@ def every_task_lines(
             "models' together), told the task by a one-hot in `observation.environment_state`; ID per task "
             "beside its blind control, then against the single-task models over the tasks.",
             "",
-            *across_tasks.task_table(records, models, tasks, LABELS, base=None, controls=("blind",)),
+            *across_tasks.task_table(records, models, tasks, labels, base=None, controls=("blind",)),
         ]
         for m in together:
-            lines += ["", *across_tasks.pooled_comparison(records, (m,), tasks, LABELS, base=m + MULTITASK)]
+            lines += ["", *across_tasks.pooled_comparison(records, (m,), tasks, labels, base=m + MULTITASK)]
     return lines
 
 
 def curve_lines(
-    cells: Mapping[results.Key, results.CellResult], methods: Sequence[str], chart: Path
+    cells: Mapping[results.Key, results.CellResult],
+    methods: Sequence[str],
+    chart: Path,
+    labels: Mapping[str, str],
 ) -> list[str]:
     """The position-shift curve: its table, the area of each method against OmniD's, the chart."""
     lines = [
@@ -268,7 +284,7 @@ def curve_lines(
         "Area: the mean success over 0-10 cm (width-weighted mean of the bands); with the same episodes in "
         "every band it is the pooled rate, given with its Wilson interval.",
         "",
-        *report.curve_table(cells, methods, TASK0, BANDS_CM, LABELS),
+        *report.curve_table(cells, methods, TASK0, BANDS_CM, labels),
     ]
     omnid = report.curve_area(cells, "omnid", TASK0, BANDS_CM)
     for m in methods:
@@ -282,7 +298,7 @@ def curve_lines(
         p_value = report.format_p(fisher_exact(a.successes, a.episodes, b.successes, b.episodes))
         lines += [
             "",
-            f"Area, OmniD - {LABELS[m]}: {difference} pp, Fisher p = {p_value} (band episodes pooled).",
+            f"Area, OmniD - {labels[m]}: {difference} pp, Fisher p = {p_value} (band episodes pooled).",
         ]
     return [*lines, "", f"![position-shift curve]({chart.name})"]
 
@@ -331,6 +347,7 @@ def write_outputs(
         groups.append(records)
     records = results.merge(groups)
     methods = ordered_models(p, records)
+    labels = p.labels
     cells = results.collect(records)
     first_seed = p.train_seeds[0]
     offline = {
@@ -339,7 +356,7 @@ def write_outputs(
         if r.kind == "offline" and r.train_seed == first_seed and is_done(r)
     }
     chart = charts.bar_chart(
-        cells, methods, tasks, TASK0, TASK1, BACKGROUND_OODS, LABELS, out / "benchmark.png"
+        cells, methods, tasks, TASK0, TASK1, BACKGROUND_OODS, labels, out / "benchmark.png"
     )
     lines = ["# OmniD benchmark: OmniD vs DP, ACT, VQ-BeT", "", *settings_markdown(p, tasks), ""]
     if also:
@@ -348,28 +365,28 @@ def write_outputs(
             "",
         ]
     lines += ["## ID success rate (%) per task, cameras B-E", ""]
-    lines += report.id_table(cells, methods, tasks, LABELS)
+    lines += report.id_table(cells, methods, tasks, labels)
     if p.every_task:
         lines += every_task_lines(p, records, methods, tasks)
     if TASK0 in tasks:
         lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
-        lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, LABELS)
+        lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, labels)
         if "omnid" in methods and len(methods) > 1:
-            lines += comparison_lines(records, methods, tasks)
+            lines += comparison_lines(records, methods, tasks, labels)
         if any(r.control for r in records):
             control_of = {
                 (s, c): control_setting(s, c, p.control_settings) for s in SETTINGS for c in CONTROLS
             }
             lines += ["", f"## Task 0 ({TASK0}): each method against its controls", ""]
             lines += report.controls_table(
-                records, methods, TASK0, SETTINGS, control_of, LABELS, CONTROL_LABELS
+                records, methods, TASK0, SETTINGS, control_of, labels, CONTROL_LABELS
             )
-        lines += fewshot_control_lines(records, methods)
+        lines += fewshot_control_lines(records, methods, labels)
         if any((m, TASK0, b) in cells for m in methods for b in BANDS):
             curve = charts.position_curve_chart(
-                cells, methods, TASK0, BANDS_CM, LABELS, out / "position_curve.png"
+                cells, methods, TASK0, BANDS_CM, labels, out / "position_curve.png"
             )
-            lines += curve_lines(cells, methods, curve)
+            lines += curve_lines(cells, methods, curve, labels)
     if offline:
         lines += [
             "",
@@ -384,12 +401,14 @@ def write_outputs(
             "yet.",
             "",
         ]
-        lines += report.offline_table(offline, methods, TASK0, heldout_settings(p, tasks), LABELS)
+        lines += report.offline_table(offline, methods, TASK0, heldout_settings(p, tasks), labels)
+    if p.variants and TASK0 in tasks:
+        lines += selection_lines(cells, p, labels)
     if p.ablations:
         lines += ["", f"## Ablation: OmniD on task 0 ({TASK0}), ID success rate (%)", ""]
         lines += report.ablation_table(cells, TASK0)
     lines += ["", f"![success rates]({chart.name})", "", "## Evaluation runs", ""]
-    lines += report.raw_table(entries, records, LABELS)
+    lines += report.raw_table(entries, records, labels)
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
     def cell_json(key: results.Key, cell: results.CellResult, control: str = "") -> dict:

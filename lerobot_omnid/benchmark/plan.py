@@ -35,12 +35,15 @@ from lerobot_omnid.benchmark.methods import (
     CAMERA_A,
     CONTROLS,
     METHODS,
+    POSITION_VARIANTS,
     VQBET_CAMERA,
+    Variant,
     ablation_flags,
     control_flags,
     finetune_flags,
     method_controls,
     method_flags,
+    variant_flags,
 )
 from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.measure.engine import Run, plan
@@ -105,6 +108,12 @@ class BenchmarkProfile:
     every_task: bool = False  # ``settings`` and the controls on every task, not on task 0 only
     multitask: bool = False  # also one OmniD and one DP trained on every task together (MULTITASK_METHODS)
     controls: tuple[str, ...] = CONTROLS  # the controls planned, of each method's (``method_controls``)
+    variants: tuple[Variant, ...] = ()  # methods with other options on task 0, each its own table row
+
+    @property
+    def labels(self) -> dict[str, str]:
+        """The table label of every model: the methods' and the variants'."""
+        return {**LABELS, **{v.name: v.label for v in self.variants}}
 
     def for_task(self, task: str) -> BenchmarkProfile:
         """This profile with ``task``'s training steps (``task_steps``), which size every method's run on
@@ -159,6 +168,13 @@ PROFILES = {
         MINI, name="six-tasks", methods=METHODS, tasks=None, heldout_episodes=0, eval_episodes=15,
         eval_seeds=(1, 2), settings=("id", "ood2"), every_task=True, controls=("blind", "scrambled"),
         fuse_last_step_only=True, multitask=True,
+    ),
+    # Validation of what extends the position curve (docs/benchmark.md#position-its-protocol): mini's OmniD
+    # and DP as trained and their POSITION_VARIANTS, in ID and the four bands on validation env seeds.
+    "position-validation": dataclasses.replace(
+        MINI, name="position-validation", heldout_episodes=0, eval_episodes=10, eval_seeds=(80,),
+        settings=("id", *BANDS), control_settings=(), controls=(), fuse_last_step_only=True,
+        variants=POSITION_VARIANTS,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
@@ -416,6 +432,18 @@ def plan_models(
                 evaluate(trained, key, task, ("id",), TRAIN_CAMERAS, control_options=onehot)
                 kinds = tuple(c for c in p.task_controls(method, task) if c == "blind")
                 controls(trained, method, task, ("id",), TRAIN_CAMERAS, kinds, key=key, options=onehot)
+    for variant in p.variants if TASK0 in tasks else ():
+        sized = p.for_task(TASK0)
+        flags = [*common(variant.method), *(f for f, _ in variant_flags(variant, sized))]
+        trained = train(
+            train_folder(p, sized.steps), variant.name, TASK0, f"{TASK0}_bcde", flags, sized.steps
+        )
+        cameras = VQBET_CAMERA if variant.method == "vqbet" else TRAIN_CAMERAS
+        settings = p.task_settings(TASK0)
+        evaluate(trained, variant.name, TASK0, settings, cameras)
+        controlled = [s for s in p.control_settings if s in settings]
+        kinds = p.task_controls(variant.method, TASK0)
+        controls(trained, variant.method, TASK0, controlled, cameras, kinds, key=variant.name)
     if p.ablations and TASK0 in tasks:
         for name in ABLATIONS:
             sized = p.for_task(TASK0)

@@ -15,7 +15,7 @@ from omnid_testing import by_name, flag
 
 from lerobot_omnid.benchmark import plan as plan_module
 from lerobot_omnid.benchmark import task_sizing
-from lerobot_omnid.benchmark.methods import METHODS
+from lerobot_omnid.benchmark.methods import METHODS, with_options
 from lerobot_omnid.benchmark.plan import (
     BANDS,
     FEWSHOT_SEED,
@@ -168,7 +168,7 @@ def test_new_tasks_are_picked_up(monkeypatch, tmp_path):
     ]
 
 
-@pytest.mark.parametrize("profile", ["mini", "paper"])
+@pytest.mark.parametrize("profile", ["mini", "paper", "position-validation"])
 def test_lerobot_parses_every_training_command(profile, tmp_path):
     """Each from-scratch training command is a valid `lerobot-train` configuration (option names, values
     and the policy configs' own checks)."""
@@ -181,6 +181,8 @@ def test_lerobot_parses_every_training_command(profile, tmp_path):
             cfg = draccus.parse(TrainPipelineConfig, args=list(run.cmd[1:]))
             assert cfg.policy.type == flag(run.cmd, "policy.type"), run.name
             assert cfg.steps == p.steps and cfg.seed == TRAIN_SEED
+            if "clip2" in run.name:
+                assert cfg.policy.clip_sample_range == 2.0, run.name
 
 
 def test_training_seeds_repeat_the_models_in_their_own_folders(tmp_path):
@@ -368,3 +370,36 @@ def test_six_tasks_profile_trains_one_model_for_every_task(tmp_path, monkeypatch
     # Some tasks of the benchmark only: no model of all tasks (it would be another model under its name).
     monkeypatch.setattr(plan_module, "available_tasks", lambda: (*tasks, "texas_holdem"))
     assert not any("multitask" in r.name for r in build_plan(p, tmp_path, tasks))
+
+
+def test_variants_train_like_their_method_with_their_options_in_the_same_cells(tmp_path):
+    """The position validation: each variant is its method's training command with its own options
+    replacing or added to the method's, evaluated in the same settings and env seeds under its own name."""
+    p = PROFILES["position-validation"]
+    runs = by_name(build_plan(p, tmp_path, (TASK0,)))
+    variants = {v.name: v for v in p.variants}
+    assert set(variants) == {"omnid_clip2", "omnid_clip2_shift5", "omnid_clip2_shift10", "diffusion_clip2"}
+    for name, variant in variants.items():
+        base, own = runs[f"train/{variant.method}/{TASK0}"].cmd, runs[f"train/{name}/{TASK0}"].cmd
+        changed = {f.split("=", 1)[0] for f, _ in variant.flags}
+        strip = [a for a in base if a.split("=", 1)[0] not in changed and not a.startswith("--output_dir=")]
+        assert strip == [
+            a for a in own if a.split("=", 1)[0] not in changed and not a.startswith("--output_dir=")
+        ]
+        assert flag(own, "policy.clip_sample_range") == "2.0"
+        for setting in ("id", *BANDS):
+            evaluation = runs[f"eval/{name}/{TASK0}/{setting}/seed80"]
+            assert flag(evaluation.cmd, "seed") == "80000" and evaluation.result == (name, TASK0, setting)
+            assert evaluation.needs == (f"train/{name}/{TASK0}",)
+    assert flag(runs[f"train/omnid_clip2_shift10/{TASK0}"].cmd, "policy.position_shift_m") == "0.1"
+    assert flag(runs[f"train/omnid/{TASK0}"].cmd, "policy.clip_sample_range") is None  # as trained
+    assert not any(r.control for r in runs.values())  # validation: no controls
+
+
+def test_with_options_replaces_an_option_of_the_same_name_and_appends_new_ones():
+    base = [("--policy.a=1", "x"), ("--policy.b=2", "y")]
+    assert with_options(base, [("--policy.b=3", "z"), ("--policy.c=4", "w")]) == [
+        ("--policy.a=1", "x"),
+        ("--policy.b=3", "z"),
+        ("--policy.c=4", "w"),
+    ]

@@ -63,6 +63,7 @@ WRITERS = {
     "rigs_and_wrist": "lerobot_omnid.benchmark.rigs_and_wrist",
     "readout_selection": "lerobot_omnid.benchmark.readout_selection",
     "position_extrapolation": "lerobot_omnid.diagnostics.position_extrapolation",
+    "action_reach": "lerobot_omnid.diagnostics.action_reach",
     "bench_policy": "benchmarks/bench_policy.py",
     "fuse_last_step_only_validation": "the validation of --policy.fuse_last_step_only (docs/benchmark.md)",
 }
