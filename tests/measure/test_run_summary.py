@@ -64,6 +64,7 @@ WRITERS = {
     "readout_selection": "lerobot_omnid.benchmark.readout_selection",
     "position_extrapolation": "lerobot_omnid.diagnostics.position_extrapolation",
     "action_reach": "lerobot_omnid.diagnostics.action_reach",
+    "layout_success": "lerobot_omnid.diagnostics.layout_success",
     "bench_policy": "benchmarks/bench_policy.py",
     "fuse_last_step_only_validation": "the validation of --policy.fuse_last_step_only (docs/benchmark.md)",
 }
