@@ -309,6 +309,30 @@ def translate_world(cam_T_world: Tensor, shift_m: Tensor) -> Tensor:
     return cam_T_world @ back
 
 
+def point_seen_on_plane(
+    pix_T_cam: Tensor, believed_T_world: Tensor, true_T_world: Tensor, point: Tensor
+) -> Tensor:
+    """Where a camera really looks when a policy believing it at ``believed_T_world`` samples ``point``: the
+    believed projection's pixel cast back through the true pose onto the horizontal plane through ``point``.
+    An object there lands in the policy's volume at ``point``; with the true pose, the result is ``point``.
+
+    Args:
+        pix_T_cam: (..., 3, 3) K.
+        believed_T_world, true_T_world: (..., 4, 4) extrinsics (the calibration used, the camera's own).
+        point: (..., 3) world point, metres.
+    Returns:
+        (..., 3) world point on the plane ``z = point.z`` (the ray's intersection; undefined for a ray
+        parallel to the plane).
+    """
+    uv, _ = project_to_pixels(pix_T_cam, apply_transform(believed_T_world, point[..., None, :]))  # ..., 1, 2
+    pixel = torch.cat([uv[..., 0, :], torch.ones_like(uv[..., 0, :1])], dim=-1)  # ..., 3
+    ray_cam = (torch.linalg.inv(pix_T_cam) @ pixel[..., None])[..., 0]
+    ray_world = (true_T_world[..., :3, :3].transpose(-1, -2) @ ray_cam[..., None])[..., 0]
+    centre = camera_centers_world(true_T_world)
+    depth = (point[..., 2:] - centre[..., 2:]) / ray_world[..., 2:]
+    return centre + depth * ray_world
+
+
 def perturb_intrinsics(pix_T_cam: Tensor, focal_scale: Tensor, principal_shift_px: Tensor) -> Tensor:
     """``fx, fy`` (and the skew) times ``focal_scale`` (...,), the principal point moved by
     ``principal_shift_px`` (..., 2). ``pix_T_cam``: (..., 3, 3)."""

@@ -14,6 +14,7 @@ from lerobot_omnid.geometry import (
     look_at,
     pixels_to_feature_grid,
     pixels_to_grid,
+    point_seen_on_plane,
     project_to_grid,
     project_to_pixels,
     translate_world,
@@ -174,3 +175,19 @@ def test_translate_world_sees_the_moved_point_where_the_old_one_was():
     assert torch.allclose(camera_centers_world(moved), camera_centers_world(cam_T_world) + shift, atol=1e-6)
     batch = translate_world(cam_T_world.expand(2, 3, 4, 4), torch.zeros(2, 3, 3))  # (..., 4, 4) batches
     assert torch.allclose(batch, cam_T_world.expand(2, 3, 4, 4))
+
+
+def test_point_seen_on_plane_undoes_a_believed_translation():
+    """A camera believed 3 cm further along world x (its centre only) samples, for ``point``, the pixel where
+    the true camera sees ``point`` 3 cm back; with the true pose it sees ``point`` itself."""
+    true = look_at(
+        torch.tensor([1.0, -0.5, 0.8], dtype=torch.float64),
+        torch.tensor([0.5, 0.0, 0.0], dtype=torch.float64),
+    )
+    shift = torch.tensor([0.03, 0.0, 0.0], dtype=torch.float64)
+    believed = translate_world(true, shift)  # the camera believed moved by +shift
+    assert torch.allclose(camera_centers_world(believed), camera_centers_world(true) + shift)
+    point = torch.tensor([0.55, 0.1, 0.035], dtype=torch.float64)
+    K64 = K.to(torch.float64)
+    assert torch.allclose(point_seen_on_plane(K64, true, true, point), point, atol=1e-9)
+    assert torch.allclose(point_seen_on_plane(K64, believed, true, point), point - shift, atol=1e-9)

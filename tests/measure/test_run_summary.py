@@ -65,6 +65,7 @@ WRITERS = {
     "position_extrapolation": "lerobot_omnid.diagnostics.position_extrapolation",
     "action_reach": "lerobot_omnid.diagnostics.action_reach",
     "layout_success": "lerobot_omnid.diagnostics.layout_success",
+    "calibration_shift": "lerobot_omnid.diagnostics.calibration_shift",
     "bench_policy": "benchmarks/bench_policy.py",
     "fuse_last_step_only_validation": "the validation of --policy.fuse_last_step_only (docs/benchmark.md)",
 }

@@ -1,0 +1,173 @@
+"""Which calibration errors hurt, and why: where each ``omnid-robustness`` draw moves the object in the plane.
+
+A BEV policy reads the gripper from the state and the object from its plane. With a camera's calibration
+off, the plane samples, for a point of the table, the pixel where that camera really shows another point
+(:func:`lerobot_omnid.geometry.point_seen_on_plane`): the object appears displaced by ``point - seen`` in
+that camera's contribution. Per draw of ``omnid-robustness``'s calibration perturbation (same seeds, same
+draws: :func:`lerobot_omnid.benchmark.robustness_plan.camera_offsets`), this gives each camera's
+displacement of the object's nominal position, their mean (where the fused plane would put the object when
+the cameras agree) and their spread (how much they disagree, which blurs it instead). Beside a robustness
+summary it lists each draw's success, so that a draw that fails can be matched with its displacement and
+with the grasp's tolerance. Pure geometry: no episode is run.
+
+    python -m lerobot_omnid.diagnostics.calibration_shift --out outputs/calibration_shift \\
+        --checkpoint outputs/six_tasks/train/omnid/select_apple/checkpoints/last/pretrained_model \\
+        --levels 2 --draws 10 [--robustness-summary outputs/robustness/summary.json --label omnid]
+
+Writes ``<out>/summary.json`` and ``<out>/report.md``; ``--report-only SUMMARY`` rebuilds the report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import torch
+
+from lerobot_omnid.benchmark.robustness_plan import (
+    camera_offsets,
+    checkpoint_from_config,
+    perturbed_calibrations,
+)
+from lerobot_omnid.geometry import point_seen_on_plane
+from lerobot_omnid.measure.engine import code_commit
+from lerobot_omnid.measure.report import write_markdown
+from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
+
+PROTOCOL = "calibration_shift"
+MODULE = "lerobot_omnid.diagnostics.calibration_shift"
+APPLE = (0.55, 0.12, 0.035)  # select_apple's apple: the centre of its training square, its centre's height
+
+
+def displacements(true: dict, believed: dict, point: torch.Tensor) -> dict[str, list[float]]:
+    """Per camera, the x-y displacement (cm) of an object at ``point`` in that camera's contribution to the
+    plane: ``point`` minus where the camera really looks when the policy samples ``point``."""
+    out = {}
+    for cam, calibration in true.items():
+        K = torch.tensor(calibration.K, dtype=torch.float64)
+        seen = point_seen_on_plane(
+            K,
+            torch.tensor(believed[cam].T_cam_world, dtype=torch.float64),
+            torch.tensor(calibration.T_cam_world, dtype=torch.float64),
+            point,
+        )
+        out[cam] = (100 * (point - seen)[:2]).tolist()
+    return out
+
+
+def draw_row(per_camera: dict[str, list[float]]) -> dict:
+    """The cameras' displacements (cm), their mean vector's length and their spread about it."""
+    vectors = torch.tensor(list(per_camera.values()), dtype=torch.float64)  # cameras, 2
+    mean = vectors.mean(dim=0)
+    return {
+        "cameras_cm": {cam: float(torch.tensor(v).norm()) for cam, v in per_camera.items()},
+        "mean_cm": float(mean.norm()),
+        "mean_vector_cm": mean.tolist(),
+        "spread_cm": float((vectors - mean).norm(dim=-1).mean()),
+    }
+
+
+def draw_successes(summary: Path, label: str) -> dict[tuple[float, int], tuple[int, int]]:
+    """{(level, draw): (successes, episodes)} of ``label``'s calibration rows in a robustness summary."""
+    rows = read_run_summary(summary, "omnid-robustness").results["checkpoints"][label]["rows"]
+    found = {}
+    for row in rows:
+        if row["condition"] == "calibration":
+            for name, successes, episodes in row["parts"]:
+                found[(row["level"], int(name.removeprefix("draw ")))] = (successes, episodes)
+    return found
+
+
+def write_report(summary: RunSummary, path: Path) -> None:
+    s = summary.settings
+    cameras = list(summary.results["draws"][0]["cameras_cm"])
+    lines = [
+        f"# Where each calibration draw moves the object: {s['checkpoint']} ({summary.commit})",
+        "",
+        f"Object at {s['point']} m; per draw, each camera's displacement of it in the plane (cm), their mean "
+        "(where agreeing cameras put it) and their spread (disagreement: blur); success from the robustness "
+        "run where given.",
+        "",
+        "| level | draw | " + " | ".join(cameras) + " | mean (cm) | spread (cm) | success |",
+        "|---|---|" + "---|" * (len(cameras) + 3),
+    ]
+    for r in summary.results["draws"]:
+        per_camera = " | ".join(f"{r['cameras_cm'][c]:.1f}" for c in cameras)
+        success = f"{r['successes']}/{r['episodes']}" if "successes" in r else "-"
+        lines.append(
+            f"| {r['level']:g} | {r['draw']} | {per_camera} | {r['mean_cm']:.1f} | {r['spread_cm']:.1f} | "
+            f"{success} |"
+        )
+    write_markdown(lines, path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--checkpoint", type=Path, help="an OmniD pretrained_model folder")
+    parser.add_argument("--levels", default="2", help="cm and degrees, comma-separated")
+    parser.add_argument("--draws", type=int, default=10)
+    parser.add_argument("--perturbation-seed", type=int, default=0, help="omnid-robustness's (default 0)")
+    parser.add_argument("--point", default=",".join(map(str, APPLE)), help="x,y,z m (select_apple's apple)")
+    parser.add_argument("--robustness-summary", type=Path, help="an omnid-robustness summary.json")
+    parser.add_argument("--label", default="omnid", help="the checkpoint's label in that summary")
+    parser.add_argument("--report-only", type=Path, metavar="SUMMARY", help="rebuild report.md from it")
+    args = parser.parse_args(argv)
+    if args.report_only:
+        try:
+            write_report(read_run_summary(args.report_only, PROTOCOL), args.out / "report.md")
+        except ValueError as e:
+            parser.error(f"--report-only: {e}")
+        return 0
+    config_file = args.checkpoint / "config.json" if args.checkpoint else None
+    if config_file is None or not config_file.is_file():
+        parser.error(
+            f"--checkpoint: expected a pretrained_model folder with config.json, got {args.checkpoint}"
+        )
+    try:
+        checkpoint = checkpoint_from_config(
+            "checkpoint", args.checkpoint, json.loads(config_file.read_text())
+        )
+        levels = [float(level) for level in args.levels.split(",")]
+        point = torch.tensor([float(v) for v in args.point.split(",")], dtype=torch.float64)
+    except ValueError as e:
+        parser.error(str(e))
+    if not checkpoint.is_omnid or point.shape != (3,):
+        parser.error(
+            f"--checkpoint/--point: expected an OmniD checkpoint and x,y,z, got {checkpoint.policy_type}"
+        )
+    successes = draw_successes(args.robustness_summary, args.label) if args.robustness_summary else {}
+    draws = []
+    for level in levels:
+        for draw in range(1, args.draws + 1):
+            believed = perturbed_calibrations(
+                checkpoint.calibrations, camera_offsets(level, draw, args.perturbation_seed)
+            )
+            row = {
+                "level": level,
+                "draw": draw,
+                **draw_row(displacements(checkpoint.calibrations, believed, point)),
+            }
+            if (level, draw) in successes:
+                row["successes"], row["episodes"] = successes[(level, draw)]
+            draws.append(row)
+    settings = {
+        "checkpoint": str(args.checkpoint),
+        "levels": levels,
+        "perturbation_seed": args.perturbation_seed,
+        "point": point.tolist(),
+    }
+    command = ["python", "-m", MODULE, *(sys.argv[1:] if argv is None else argv)]
+    summary = RunSummary(PROTOCOL, settings, results={"draws": draws}, commit=code_commit(), command=command)
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_run_summary(args.out / SUMMARY, summary)
+    write_report(summary, args.out / "report.md")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

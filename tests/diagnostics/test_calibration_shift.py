@@ -1,0 +1,64 @@
+"""calibration_shift: the object's displacement per camera and draw, their mean and spread, joined with a
+robustness run's per-draw success."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from omnid_testing import synthetic_calibration
+
+from lerobot_omnid.benchmark.robustness_plan import camera_offsets, perturbed_calibrations
+from lerobot_omnid.calibration.schema import CameraCalibration
+from lerobot_omnid.diagnostics import calibration_shift
+from lerobot_omnid.diagnostics.calibration_shift import displacements, draw_row, main
+from lerobot_omnid.measure.results import RunSummary, read_run_summary, write_run_summary
+
+CAMS = ("cam_b", "cam_c", "cam_d", "cam_e")
+POINT = torch.tensor([0.55, 0.12, 0.035], dtype=torch.float64)
+
+
+def calibrations() -> dict[str, CameraCalibration]:
+    return {c: CameraCalibration.from_dict(synthetic_calibration(c, 32), c) for c in CAMS}
+
+
+def test_no_error_no_displacement_and_larger_errors_move_it_further():
+    true = calibrations()
+    assert all(v == pytest.approx([0, 0], abs=1e-9) for v in displacements(true, true, POINT).values())
+    sizes = []
+    for level in (1.0, 4.0):
+        believed = perturbed_calibrations(true, camera_offsets(level, 1, 0))
+        sizes.append(draw_row(displacements(true, believed, POINT))["cameras_cm"])
+    assert all(sizes[1][c] > sizes[0][c] > 0 for c in CAMS)
+
+
+def test_draw_row_separates_agreement_from_disagreement():
+    agree = draw_row({"a": [2.0, 0.0], "b": [2.0, 0.0]})
+    assert agree["mean_cm"] == pytest.approx(2.0) and agree["spread_cm"] == pytest.approx(0.0)
+    cancel = draw_row({"a": [2.0, 0.0], "b": [-2.0, 0.0]})
+    assert cancel["mean_cm"] == pytest.approx(0.0) and cancel["spread_cm"] == pytest.approx(2.0)
+
+
+def test_joins_each_draw_with_its_success(tmp_path, monkeypatch):
+    monkeypatch.setattr(calibration_shift, "code_commit", lambda: "abc123")  # git runs only in tests/e2e
+    checkpoint = tmp_path / "pretrained_model"
+    checkpoint.mkdir()
+    config = {
+        "type": "omnid",
+        "input_features": {f"observation.images.{c}": {"type": "VISUAL", "shape": [3, 32, 32]} for c in CAMS},
+        "camera_calibration": {f"observation.images.{c}": synthetic_calibration(c, 32) for c in CAMS},
+    }
+    (checkpoint / "config.json").write_text(json.dumps(config))
+    rows = [{"condition": "calibration", "level": 2.0, "parts": [["draw 1", 3, 10], ["draw 2", 9, 10]]}]
+    results = {"checkpoints": {"omnid": {"rows": rows}}}
+    write_run_summary(tmp_path / "robustness.json", RunSummary("omnid-robustness", {}, results=results))
+    args = ["--out", str(tmp_path / "out"), "--checkpoint", str(checkpoint), "--levels", "2", "--draws", "3"]
+    assert main([*args, "--robustness-summary", str(tmp_path / "robustness.json")]) == 0
+    draws = read_run_summary(tmp_path / "out", "calibration_shift").results["draws"]
+    assert [(d["draw"], d.get("successes")) for d in draws] == [(1, 3), (2, 9), (3, None)]
+    assert set(draws[0]["cameras_cm"]) == set(CAMS) and draws[0]["mean_cm"] > 0
+    assert main(["--out", str(tmp_path / "again"), "--report-only", str(tmp_path / "out")]) == 0
+    assert "| 2 | 1 |" in (tmp_path / "again" / "report.md").read_text()
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path / "x"), "--checkpoint", str(tmp_path)])
