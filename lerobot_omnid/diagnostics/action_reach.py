@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -29,9 +28,9 @@ from gym_omnid import ACTION_NAMES, LAYOUTS
 from gym_omnid.experts import interpolate, make_expert
 from tqdm import tqdm
 
+from lerobot_omnid.diagnostics import summary
 from lerobot_omnid.measure.engine import code_commit
-from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
+from lerobot_omnid.measure.results import RunSummary
 from lerobot_omnid.measure.stats import wilson_interval
 
 REACH_SEED = 500_000  # first env seed of the layouts examined
@@ -88,51 +87,40 @@ def reach(task: str, layout: str, episodes: int, low: np.ndarray, high: np.ndarr
     }
 
 
-def write_report(summaries: list[RunSummary], path: Path) -> None:
-    """One table per summary (a clip range, a dataset), written to ``path`` and printed."""
-    lines = []
-    for summary in summaries:
-        s = summary.settings
-        lines += [
-            f"# Action reach: {s['task']}, training actions of {s['dataset']}, "
-            f"clip_sample_range {s['clip_range']} ({summary.commit})",
-            "",
-            "| layout | expert plans leaving the generable range (Wilson 95 %) | dims "
-            "| position excess, median / max (cm) |",
-            "|---|---|---|---|",
-        ]
-        for layout, r in summary.results["layouts"].items():
-            est = wilson_interval(r["beyond"], r["episodes"])
-            dims = ", ".join(f"{name} {n}" for name, n in r["beyond_by_dim"].items()) or "-"
-            lines.append(
-                f"| {layout} | {r['beyond']}/{r['episodes']} = {100 * est.value:.1f} % ({100 * est.low:.1f}-"
-                f"{100 * est.high:.1f}) | {dims} | {r['median_position_excess_cm']:.1f} / "
-                f"{r['max_position_excess_cm']:.1f} |"
-            )
-        lines.append("")
-    write_markdown(lines[:-1], path)
+def report_lines(summary: RunSummary) -> list[str]:
+    """The table of one summary (a clip range, a dataset)."""
+    s = summary.settings
+    lines = [
+        f"# Action reach: {s['task']}, training actions of {s['dataset']}, "
+        f"clip_sample_range {s['clip_range']} ({summary.commit})",
+        "",
+        "| layout | expert plans leaving the generable range (Wilson 95 %) | dims "
+        "| position excess, median / max (cm) |",
+        "|---|---|---|---|",
+    ]
+    for layout, r in summary.results["layouts"].items():
+        est = wilson_interval(r["beyond"], r["episodes"])
+        dims = ", ".join(f"{name} {n}" for name, n in r["beyond_by_dim"].items()) or "-"
+        lines.append(
+            f"| {layout} | {r['beyond']}/{r['episodes']} = {100 * est.value:.1f} % ({100 * est.low:.1f}-"
+            f"{100 * est.high:.1f}) | {dims} | {r['median_position_excess_cm']:.1f} / "
+            f"{r['max_position_excess_cm']:.1f} |"
+        )
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--out", type=Path, required=True)
+    summary.add_options(parser)
     parser.add_argument("--dataset", type=Path, help="the training dataset (its meta/stats.json)")
     parser.add_argument("--task", default="select_apple")
     parser.add_argument("--layouts", default=",".join(LAYOUTS[:1] + LAYOUTS[2:]))
     parser.add_argument("--episodes", type=int, default=200, help="layouts examined per layout kind")
     parser.add_argument("--clip-range", type=float, default=1.0, help="the policy's clip_sample_range")
-    parser.add_argument(
-        "--report-only", nargs="+", type=Path, metavar="SUMMARY", help="rebuild report.md from these"
-    )
     args = parser.parse_args(argv)
-    if args.report_only:
-        try:
-            summaries = [read_run_summary(path, PROTOCOL) for path in args.report_only]
-        except ValueError as e:
-            parser.error(f"--report-only: {e}")
-        write_report(summaries, args.out / "report.md")
+    if summary.rebuild(parser, args, PROTOCOL, report_lines):
         return 0
     stats_path = args.dataset / "meta" / "stats.json" if args.dataset else None
     if stats_path is None or not stats_path.is_file():
@@ -154,13 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         "generable_low": low.tolist(),
         "generable_high": high.tolist(),
     }
-    command = ["python", "-m", MODULE, *(sys.argv[1:] if argv is None else argv)]
-    summary = RunSummary(
-        PROTOCOL, settings, results={"layouts": results}, commit=code_commit(), command=command
-    )
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_run_summary(args.out / SUMMARY, summary)
-    write_report([summary], args.out / "report.md")
+    summary.finish(args, PROTOCOL, MODULE, argv, settings, {"layouts": results}, code_commit(), report_lines)
     return 0
 
 

@@ -14,14 +14,14 @@ with the grasp's tolerance. Pure geometry: no episode is run.
         --checkpoint outputs/six_tasks/train/omnid/select_apple/checkpoints/last/pretrained_model \\
         --levels 2 --draws 10 [--robustness-summary outputs/robustness/summary.json --label omnid]
 
-Writes ``<out>/summary.json`` and ``<out>/report.md``; ``--report-only SUMMARY`` rebuilds the report.
+Writes ``<out>/summary.json`` and ``<out>/report.md``; ``--report-only SUMMARY...`` rebuilds the report
+from such files alone.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import torch
@@ -31,10 +31,10 @@ from lerobot_omnid.benchmark.robustness_plan import (
     checkpoint_from_config,
     perturbed_calibrations,
 )
+from lerobot_omnid.diagnostics import summary
 from lerobot_omnid.geometry import point_seen_on_plane
 from lerobot_omnid.measure.engine import code_commit
-from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
+from lerobot_omnid.measure.results import RunSummary, read_run_summary
 
 PROTOCOL = "calibration_shift"
 MODULE = "lerobot_omnid.diagnostics.calibration_shift"
@@ -80,7 +80,7 @@ def draw_successes(summary: Path, label: str) -> dict[tuple[float, int], tuple[i
     return found
 
 
-def write_report(summary: RunSummary, path: Path) -> None:
+def report_lines(summary: RunSummary) -> list[str]:
     s = summary.settings
     cameras = list(summary.results["draws"][0]["cameras_cm"])
     lines = [
@@ -100,14 +100,14 @@ def write_report(summary: RunSummary, path: Path) -> None:
             f"| {r['level']:g} | {r['draw']} | {per_camera} | {r['mean_cm']:.1f} | {r['spread_cm']:.1f} | "
             f"{success} |"
         )
-    write_markdown(lines, path)
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--out", type=Path, required=True)
+    summary.add_options(parser)
     parser.add_argument("--checkpoint", type=Path, help="an OmniD pretrained_model folder")
     parser.add_argument("--levels", default="2", help="cm and degrees, comma-separated")
     parser.add_argument("--draws", type=int, default=10)
@@ -115,13 +115,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--point", default=",".join(map(str, APPLE)), help="x,y,z m (select_apple's apple)")
     parser.add_argument("--robustness-summary", type=Path, help="an omnid-robustness summary.json")
     parser.add_argument("--label", default="omnid", help="the checkpoint's label in that summary")
-    parser.add_argument("--report-only", type=Path, metavar="SUMMARY", help="rebuild report.md from it")
     args = parser.parse_args(argv)
-    if args.report_only:
-        try:
-            write_report(read_run_summary(args.report_only, PROTOCOL), args.out / "report.md")
-        except ValueError as e:
-            parser.error(f"--report-only: {e}")
+    if summary.rebuild(parser, args, PROTOCOL, report_lines):
         return 0
     config_file = args.checkpoint / "config.json" if args.checkpoint else None
     if config_file is None or not config_file.is_file():
@@ -161,11 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         "perturbation_seed": args.perturbation_seed,
         "point": point.tolist(),
     }
-    command = ["python", "-m", MODULE, *(sys.argv[1:] if argv is None else argv)]
-    summary = RunSummary(PROTOCOL, settings, results={"draws": draws}, commit=code_commit(), command=command)
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_run_summary(args.out / SUMMARY, summary)
-    write_report(summary, args.out / "report.md")
+    summary.finish(args, PROTOCOL, MODULE, argv, settings, {"draws": draws}, code_commit(), report_lines)
     return 0
 
 

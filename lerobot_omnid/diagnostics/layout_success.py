@@ -14,14 +14,13 @@ read beside a table, not a claim: many tests, none corrected.
 Reads the evaluations of ``--summary`` (an ``omnid-benchmark`` folder's, whose ``eval_info.json`` files
 must still be there; run from where the benchmark ran) for the task and setting, controls left out. Writes
 ``<out>/summary.json`` (the counts and means under ``results``) and ``<out>/report.md``; ``--report-only
-SUMMARY`` rebuilds the report from such a file alone.
+SUMMARY...`` rebuilds the report from such files alone.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -30,14 +29,11 @@ import numpy as np
 from tqdm import tqdm
 
 from lerobot_omnid.benchmark.plan import setting_env
+from lerobot_omnid.diagnostics import summary
 from lerobot_omnid.measure.engine import code_commit
-from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import (
-    SUMMARY,
     RunSummary,
-    read_run_summary,
     read_summary,
-    write_run_summary,
 )
 
 PROTOCOL = "layout_success"
@@ -108,7 +104,7 @@ def compare(episodes: list[dict]) -> dict[str, dict]:
     return result
 
 
-def write_report(summary: RunSummary, path: Path) -> None:
+def report_lines(summary: RunSummary) -> list[str]:
     s, results = summary.settings, summary.results
     lines = [
         f"# Success against the layout: {s['task']}, {s['setting']} ({summary.commit})",
@@ -134,24 +130,19 @@ def write_report(summary: RunSummary, path: Path) -> None:
     for r in results["range_means"]:
         means = " | ".join(f"{v:.1f}" for v in r["means"].values())
         lines.append(f"| {r['first']}-{r['first'] + r['episodes'] - 1} | {r['episodes']} | {means} |")
-    write_markdown(lines, path)
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--out", type=Path, required=True)
+    summary.add_options(parser)
     parser.add_argument("--summary", type=Path, help="an omnid-benchmark folder's summary.json")
     parser.add_argument("--task")
     parser.add_argument("--setting", default="id")
-    parser.add_argument("--report-only", type=Path, metavar="SUMMARY", help="rebuild report.md from it")
     args = parser.parse_args(argv)
-    if args.report_only:
-        try:
-            write_report(read_run_summary(args.report_only, PROTOCOL), args.out / "report.md")
-        except ValueError as e:
-            parser.error(f"--report-only: {e}")
+    if summary.rebuild(parser, args, PROTOCOL, report_lines):
         return 0
     if args.summary is None or args.task is None:
         parser.error("--summary and --task: expected both (or --report-only)")
@@ -195,11 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         range_means.append({"first": first, "episodes": n, "means": means})
     settings = {"task": args.task, "setting": args.setting, "summary": args.summary.name}
     results = {"models": models, "range_means": range_means}
-    command = ["python", "-m", MODULE, *(sys.argv[1:] if argv is None else argv)]
-    summary = RunSummary(PROTOCOL, settings, results=results, commit=code_commit(), command=command)
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_run_summary(args.out / SUMMARY, summary)
-    write_report(summary, args.out / "report.md")
+    summary.finish(args, PROTOCOL, MODULE, argv, settings, results, code_commit(), report_lines)
     return 0
 
 
