@@ -37,7 +37,6 @@ from pathlib import Path
 from lerobot_omnid.benchmark.methods import METHODS
 from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs, write_summary
 from lerobot_omnid.benchmark.plan import (
-    LABELS,
     PROFILES,
     SETTINGS,
     BenchmarkProfile,
@@ -156,8 +155,10 @@ def resolve_profile(parser: argparse.ArgumentParser, args: argparse.Namespace) -
                 f"--task-steps: expected positive step counts per task, got {unsized} in {args.task_steps}"
             )
         changes["task_steps"] = tuple(sizing.items())
-    if "omnid" not in changes.get("methods", p.methods):
+    methods = changes.get("methods", p.methods)
+    if "omnid" not in methods:
         changes["ablations"] = False  # OmniD's ablations are compared with OmniD itself
+    changes["variants"] = tuple(v for v in p.variants if v.method in methods)  # of the methods kept
     return dataclasses.replace(p, **changes)
 
 
@@ -235,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     for cell in [*summary["cells"], *summary["controls"]]:
         low, high = cell["wilson_95"]
         print(
-            f"  {LABELS.get(cell['model'], cell['model'])} {cell['task']} {cell['setting']}"
+            f"  {p.labels.get(cell['model'], cell['model'])} {cell['task']} {cell['setting']}"
             f"{' ' + cell['control'] if cell['control'] else ''}: {cell['successes']}/{cell['episodes']} "
             f"= {cell['success_rate']:.1f}% ({low:.1f}-{high:.1f})"
         )

@@ -171,12 +171,12 @@ def eval_entry(run: Run) -> results.EvalEntry:
 
 def ordered_models(p: BenchmarkProfile, records: Sequence[results.EvalRecord]) -> tuple[str, ...]:
     """The profile's methods and any other method found in merged records, in the paper's order, each
-    followed by the profile's variants of it."""
+    followed by those of the profile's variants of it that have records."""
     found = {r.key[0] for r in records}
     models = []
     for m in METHODS:
         models += [m] if m in p.methods or m in found else []
-        models += [v.name for v in p.variants if v.method == m]
+        models += [v.name for v in p.variants if v.method == m and v.name in found]
     return tuple(models)
 
 

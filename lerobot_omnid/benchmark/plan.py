@@ -110,6 +110,16 @@ class BenchmarkProfile:
     controls: tuple[str, ...] = CONTROLS  # the controls planned, of each method's (``method_controls``)
     variants: tuple[Variant, ...] = ()  # methods with other options on task 0, each its own table row
 
+    def __post_init__(self) -> None:
+        """Variants: distinct names that are no method's or other model's, of a method the profile trains."""
+        names = [v.name for v in self.variants]
+        for v in self.variants:
+            if v.method not in self.methods or v.name in LABELS or names.count(v.name) > 1:
+                raise ValueError(
+                    f"variants: expected distinct new names of methods among {list(self.methods)}, got "
+                    f"{v.name!r} of {v.method!r}"
+                )
+
     @property
     def labels(self) -> dict[str, str]:
         """The table label of every model: the methods' and the variants'."""
@@ -169,8 +179,9 @@ PROFILES = {
         eval_seeds=(1, 2), settings=("id", "ood2"), every_task=True, controls=("blind", "scrambled"),
         fuse_last_step_only=True, multitask=True,
     ),
-    # Validation of what extends the position curve (docs/benchmark.md#position-its-protocol): mini's OmniD
-    # and DP as trained and their POSITION_VARIANTS, in ID and the four bands on validation env seeds.
+    # Validation of what extends the position curve (docs/benchmark.md#position-its-protocol): OmniD and DP
+    # trained as for six-tasks (mini's options, OmniD encoding the last step only) and their
+    # POSITION_VARIANTS, in ID and the four bands on validation env seeds.
     "position-validation": dataclasses.replace(
         MINI, name="position-validation", heldout_episodes=0, eval_episodes=10, eval_seeds=(80,),
         settings=("id", *BANDS), control_settings=(), controls=(), fuse_last_step_only=True,

@@ -31,11 +31,16 @@ class Candidate:
 
 
 def candidates(cells: Mapping[Key, CellResult], p: BenchmarkProfile, method: str) -> list[Candidate] | None:
-    """``method``'s candidates with their validation counts; None until every one has every cell."""
+    """``method``'s candidates with their validation counts; None until every one has every cell. The
+    rule counts successes: every candidate must have as many episodes in each setting."""
     models = [method, *(v.name for v in p.variants if v.method == method)]
     bands = [b for b in BANDS if b in p.settings]
     if any((m, TASK0, s) not in cells for m in models for s in ("id", *bands)):
         return None
+    for setting in ("id", *bands):
+        episodes = {m: cells[(m, TASK0, setting)].episodes for m in models}
+        if len(set(episodes.values())) > 1:
+            raise ValueError(f"{setting}: expected the same episodes for every candidate, got {episodes}")
     base_id = cells[(method, TASK0, "id")].successes
     found = []
     for m in models:

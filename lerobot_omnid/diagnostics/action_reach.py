@@ -87,18 +87,18 @@ def reach(task: str, layout: str, episodes: int, low: np.ndarray, high: np.ndarr
     }
 
 
-def report_lines(summary: RunSummary) -> list[str]:
+def report_lines(run: RunSummary) -> list[str]:
     """The table of one summary (a clip range, a dataset)."""
-    s = summary.settings
+    s = run.settings
     lines = [
         f"# Action reach: {s['task']}, training actions of {s['dataset']}, "
-        f"clip_sample_range {s['clip_range']} ({summary.commit})",
+        f"clip_sample_range {s['clip_range']} ({run.commit})",
         "",
         "| layout | expert plans leaving the generable range (Wilson 95 %) | dims "
         "| position excess, median / max (cm) |",
         "|---|---|---|---|",
     ]
-    for layout, r in summary.results["layouts"].items():
+    for layout, r in run.results["layouts"].items():
         est = wilson_interval(r["beyond"], r["episodes"])
         dims = ", ".join(f"{name} {n}" for name, n in r["beyond_by_dim"].items()) or "-"
         lines.append(

@@ -31,6 +31,7 @@ from lerobot_omnid.benchmark.robustness_plan import (
     checkpoint_from_config,
     perturbed_calibrations,
 )
+from lerobot_omnid.cli import csv_of, positive_int
 from lerobot_omnid.diagnostics import summary
 from lerobot_omnid.geometry import point_seen_on_plane
 from lerobot_omnid.measure.engine import code_commit
@@ -69,22 +70,31 @@ def draw_row(per_camera: dict[str, list[float]]) -> dict:
     }
 
 
-def draw_successes(summary: Path, label: str) -> dict[tuple[float, int], tuple[int, int]]:
-    """{(level, draw): (successes, episodes)} of ``label``'s calibration rows in a robustness summary."""
-    rows = read_run_summary(summary, "omnid-robustness").results["checkpoints"][label]["rows"]
+def draw_successes(
+    path: Path, label: str, perturbation_seed: int
+) -> dict[tuple[float, int], tuple[int, int]]:
+    """{(level, draw): (successes, episodes)} of ``label``'s calibration rows in a robustness summary made
+    with the same ``perturbation_seed`` (else its draws are others); errors name the field."""
+    run = read_run_summary(path, "omnid-robustness")
+    seed = run.settings.get("perturbation_seed")
+    if seed != perturbation_seed:
+        raise ValueError(f"{path}: perturbation_seed: expected {perturbation_seed}, got {seed}")
+    checkpoints = run.results["checkpoints"]
+    if label not in checkpoints:
+        raise ValueError(f"{path}: --label: expected one of {sorted(checkpoints)}, got {label!r}")
     found = {}
-    for row in rows:
+    for row in checkpoints[label]["rows"]:
         if row["condition"] == "calibration":
             for name, successes, episodes in row["parts"]:
                 found[(row["level"], int(name.removeprefix("draw ")))] = (successes, episodes)
     return found
 
 
-def report_lines(summary: RunSummary) -> list[str]:
-    s = summary.settings
-    cameras = list(summary.results["draws"][0]["cameras_cm"])
+def report_lines(run: RunSummary) -> list[str]:
+    s = run.settings
+    cameras = list(run.results["draws"][0]["cameras_cm"])
     lines = [
-        f"# Where each calibration draw moves the object: {s['checkpoint']} ({summary.commit})",
+        f"# Where each calibration draw moves the object: {s['checkpoint']} ({run.commit})",
         "",
         f"Object at {s['point']} m; per draw, each camera's displacement of it in the plane (cm), their mean "
         "(where agreeing cameras put it) and their spread (disagreement: blur); success from the robustness "
@@ -93,7 +103,7 @@ def report_lines(summary: RunSummary) -> list[str]:
         "| level | draw | " + " | ".join(cameras) + " | mean (cm) | spread (cm) | success |",
         "|---|---|" + "---|" * (len(cameras) + 3),
     ]
-    for r in summary.results["draws"]:
+    for r in run.results["draws"]:
         per_camera = " | ".join(f"{r['cameras_cm'][c]:.1f}" for c in cameras)
         success = f"{r['successes']}/{r['episodes']}" if "successes" in r else "-"
         lines.append(
@@ -110,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     summary.add_options(parser)
     parser.add_argument("--checkpoint", type=Path, help="an OmniD pretrained_model folder")
     parser.add_argument("--levels", default="2", help="cm and degrees, comma-separated")
-    parser.add_argument("--draws", type=int, default=10)
+    parser.add_argument("--draws", type=positive_int, default=10)
     parser.add_argument("--perturbation-seed", type=int, default=0, help="omnid-robustness's (default 0)")
     parser.add_argument("--point", default=",".join(map(str, APPLE)), help="x,y,z m (select_apple's apple)")
     parser.add_argument("--robustness-summary", type=Path, help="an omnid-robustness summary.json")
@@ -127,15 +137,20 @@ def main(argv: list[str] | None = None) -> int:
         checkpoint = checkpoint_from_config(
             "checkpoint", args.checkpoint, json.loads(config_file.read_text())
         )
-        levels = [float(level) for level in args.levels.split(",")]
-        point = torch.tensor([float(v) for v in args.point.split(",")], dtype=torch.float64)
     except ValueError as e:
         parser.error(str(e))
-    if not checkpoint.is_omnid or point.shape != (3,):
-        parser.error(
-            f"--checkpoint/--point: expected an OmniD checkpoint and x,y,z, got {checkpoint.policy_type}"
-        )
-    successes = draw_successes(args.robustness_summary, args.label) if args.robustness_summary else {}
+    if not checkpoint.is_omnid:
+        parser.error(f"--checkpoint: expected an OmniD checkpoint, got a {checkpoint.policy_type} one")
+    levels = csv_of(float, None)(args.levels)
+    point = torch.tensor(csv_of(float, None)(args.point), dtype=torch.float64)
+    if point.shape != (3,):
+        parser.error(f"--point: expected x,y,z (m), got {args.point!r}")
+    successes = {}
+    if args.robustness_summary:
+        try:
+            successes = draw_successes(args.robustness_summary, args.label, args.perturbation_seed)
+        except ValueError as e:
+            parser.error(f"--robustness-summary: {e}")
     draws = []
     for level in levels:
         for draw in range(1, args.draws + 1):

@@ -104,10 +104,10 @@ def compare(episodes: list[dict]) -> dict[str, dict]:
     return result
 
 
-def report_lines(summary: RunSummary) -> list[str]:
-    s, results = summary.settings, summary.results
+def report_lines(run: RunSummary) -> list[str]:
+    s, results = run.settings, run.results
     lines = [
-        f"# Success against the layout: {s['task']}, {s['setting']} ({summary.commit})",
+        f"# Success against the layout: {s['task']}, {s['setting']} ({run.commit})",
         "",
         "Mean key-object position (cm, world frame) in the episodes each model solved and in those it did "
         f"not; two-sided permutation p ({PERMUTATIONS} permutations), uncorrected.",
@@ -184,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
             for i, axis in enumerate(AXES)
         }
         range_means.append({"first": first, "episodes": n, "means": means})
-    settings = {"task": args.task, "setting": args.setting, "summary": args.summary.name}
+    settings = {"task": args.task, "setting": args.setting, "summary": str(args.summary)}
     results = {"models": models, "range_means": range_means}
     summary.finish(args, PROTOCOL, MODULE, argv, settings, results, code_commit(), report_lines)
     return 0

@@ -145,7 +145,7 @@ class OmniDConfig(PreTrainedConfig):
             farther needs a TCP target ``d`` farther. For absolute world-frame TCP actions (the omnid
             envs'); the state's joint angles do not move with it. The head must be able to command the
             shifted targets: with ``clip_sample`` the policy refuses a ``clip_sample_range`` that clips them
-            (checked against the dataset's statistics when it is made for training).
+            (checked against the dataset's statistics at the first training step).
         state_position_dims, action_position_dims: Indices of the TCP's world x and y in
             ``observation.state`` and ``action``, for ``position_shift_m`` (the omnid envs': 0 and 1).
         fuse_last_step_only: Only the last observation step's images go through the backbone and the OFG

@@ -112,10 +112,12 @@ def _frame_name(batch: Mapping[str, Tensor], index: tuple[int, ...], lead: torch
     return ", ".join(parts)
 
 
-def normalised_per_metre(stats: Mapping[str, Tensor] | None, dims: tuple[int, ...], mode) -> Tensor | None:
-    """(len(dims),) normalised units per metre of a feature's ``dims`` under its normalisation ``mode``
+def normalised_per_metre(
+    feature: str, stats: Mapping[str, Tensor] | None, dims: tuple[int, ...], mode: NormalizationMode
+) -> Tensor | None:
+    """(len(dims),) normalised units per metre of ``feature``'s ``dims`` under its normalisation ``mode``
     (LeRobot's: MIN_MAX maps ``[min, max]`` to ``[-1, 1]``, MEAN_STD divides by ``std``), from its dataset
-    ``stats``; None without stats."""
+    ``stats``; None when ``stats`` are needed and missing."""
     if mode is NormalizationMode.IDENTITY:
         return torch.ones(len(dims))
     if stats is None:
@@ -129,7 +131,9 @@ def normalised_per_metre(stats: Mapping[str, Tensor] | None, dims: tuple[int, ..
         return 2 / width.clamp(min=1e-8)
     if mode is NormalizationMode.MEAN_STD:
         return 1 / torch.as_tensor(stats["std"], dtype=torch.float32)[index].clamp(min=1e-8)
-    raise ValueError(f"`position_shift_m`: expected MIN_MAX, MEAN_STD or IDENTITY normalisation, got {mode}")
+    raise ValueError(
+        f"`position_shift_m`: expected MIN_MAX, MEAN_STD or IDENTITY normalisation of `{feature}`, got {mode}"
+    )
 
 
 def _sample_visibility(visible: Tensor) -> Tensor:
@@ -502,22 +506,31 @@ class OmniDPolicy(PreTrainedPolicy):
         return x.view_as(images), crop_intrinsics(pix_T_cam, box, input_hw)
 
     def _set_shift_scales(self, stats: Mapping[str, Mapping[str, Tensor]] | None) -> None:
-        """``position_shift_m``'s units per metre of state and action, and the check that the clipped head
-        can still command the shifted action targets."""
+        """``position_shift_m``'s normalised units per metre of the state's and the action's TCP x, y, from
+        the dataset's statistics (left empty without them: a policy loaded for inference needs none)."""
         c = self.config
         modes = c.normalization_mapping
-        state = normalised_per_metre(
-            stats.get(OBS_STATE) if stats else None, c.state_position_dims, NormalizationMode(modes["STATE"])
-        )
-        action = normalised_per_metre(
-            stats.get(ACTION) if stats else None, c.action_position_dims, NormalizationMode(modes["ACTION"])
-        )
-        if state is None or action is None:
-            return  # a policy loaded for inference: the shift is a training option
-        self.state_shift_scale, self.action_shift_scale = state, action
-        reach = 1 + c.position_shift_m * float(action.max())
-        clipped = NormalizationMode(modes["ACTION"]) is NormalizationMode.MIN_MAX and c.clip_sample
-        if clipped and c.clip_sample_range < reach:
+        scales = [
+            normalised_per_metre(key, stats.get(key) if stats else None, dims, NormalizationMode(modes[kind]))
+            for key, dims, kind in (
+                (OBS_STATE, c.state_position_dims, "STATE"),
+                (ACTION, c.action_position_dims, "ACTION"),
+            )
+        ]
+        if None not in scales:
+            self.state_shift_scale, self.action_shift_scale = scales
+
+    def _check_shift_reach(self) -> None:
+        """Training with a shift needs the units, and a head that can command the shifted action targets."""
+        c = self.config
+        if self.action_shift_scale.numel() == 0:
+            raise ValueError(
+                "`position_shift_m` > 0 needs the dataset's statistics to convert metres to normalised "
+                "units: make the policy with `dataset_stats` (lerobot-train's make_policy passes them)"
+            )
+        reach = 1 + c.position_shift_m * float(self.action_shift_scale.max())
+        clipped = NormalizationMode(c.normalization_mapping["ACTION"]) is NormalizationMode.MIN_MAX
+        if clipped and c.clip_sample and c.clip_sample_range < reach:
             raise ValueError(
                 f"`position_shift_m` = {c.position_shift_m} m moves the normalised action's x, y by up "
                 f"to {reach - 1:.2f} (this dataset's action range), beyond `clip_sample_range` = "
@@ -538,11 +551,7 @@ class OmniDPolicy(PreTrainedPolicy):
             ``stacked`` with its state's TCP x, y and its cameras moved by the shift, and the actions' TCP
             x, y moved by it.
         """
-        if self.action_shift_scale.numel() == 0:
-            raise ValueError(
-                "`position_shift_m` > 0 needs the dataset's statistics to convert metres to normalised "
-                "units: make the policy with `dataset_stats` (lerobot-train's make_policy passes them)"
-            )
+        self._check_shift_reach()
         B = actions.shape[0]
         if shift_xy is None:
             shift_xy = (torch.rand(B, 2, device=actions.device) * 2 - 1) * self.config.position_shift_m
@@ -552,12 +561,13 @@ class OmniDPolicy(PreTrainedPolicy):
         stacked[OBS_STATE] = state
         actions = actions.clone()
         actions[..., list(self.config.action_position_dims)] += shift_xy[:, None] * self.action_shift_scale
-        cam_T_world = stacked[FRAME_MATRICES[1]]
-        shift = F.pad(shift_xy, (0, 1)).to(cam_T_world.dtype)  # B, 3: nothing moves in z
+        cam_T_world = stacked[FRAME_MATRICES[1]].float()
+        shift = F.pad(shift_xy, (0, 1)).float()  # B, 3: nothing moves in z
         lead = (B,) + (1,) * (cam_T_world.ndim - 3)
-        stacked[FRAME_MATRICES[1]] = translate_world(
-            cam_T_world, shift.view(*lead, 3).expand(*cam_T_world.shape[:-2], 3)
-        )
+        with torch.autocast(cam_T_world.device.type, enabled=False):  # geometry in full precision
+            stacked[FRAME_MATRICES[1]] = translate_world(
+                cam_T_world, shift.view(*lead, 3).expand(*cam_T_world.shape[:-2], 3)
+            )
         return stacked, actions
 
     @torch.no_grad()

@@ -3,6 +3,8 @@ the simplest; nothing chosen before every candidate is evaluated; the report's s
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from lerobot_omnid.benchmark import new_camera, readout_selection, task_sizing
@@ -72,3 +74,16 @@ def test_validation_seeds_are_disjoint_from_every_other_seed_set():
     others |= seeds(readout_selection.VALIDATION_SEED) | seeds(task_sizing.VALIDATION_SEED)
     others |= seeds(new_camera.VALIDATION_SEED)
     assert validation and not validation & (test | others)
+
+
+def test_candidates_must_have_as_many_episodes_and_variants_a_trained_method():
+    cells = cells_of({m: (8, 0) for m in OMNID_MODELS})
+    cells[("omnid_clip2", TASK0, "id")] = CellResult(8, 20, ())  # evaluated twice as often
+    with pytest.raises(ValueError, match=r"id: expected the same episodes for every candidate"):
+        candidates(cells, P, "omnid")
+    with pytest.raises(
+        ValueError, match=r"variants: expected distinct new names of methods among \['omnid'\]"
+    ):
+        dataclasses.replace(P, methods=("omnid",))
+    with pytest.raises(ValueError, match="got 'omnid_clip2' of 'omnid'"):
+        dataclasses.replace(P, variants=(*P.variants, P.variants[0]))

@@ -52,7 +52,8 @@ def test_joins_each_draw_with_its_success(tmp_path, monkeypatch):
     (checkpoint / "config.json").write_text(json.dumps(config))
     rows = [{"condition": "calibration", "level": 2.0, "parts": [["draw 1", 3, 10], ["draw 2", 9, 10]]}]
     results = {"checkpoints": {"omnid": {"rows": rows}}}
-    write_run_summary(tmp_path / "robustness.json", RunSummary("omnid-robustness", {}, results=results))
+    settings = {"perturbation_seed": 0}
+    write_run_summary(tmp_path / "robustness.json", RunSummary("omnid-robustness", settings, results=results))
     args = ["--out", str(tmp_path / "out"), "--checkpoint", str(checkpoint), "--levels", "2", "--draws", "3"]
     assert main([*args, "--robustness-summary", str(tmp_path / "robustness.json")]) == 0
     draws = read_run_summary(tmp_path / "out", "calibration_shift").results["draws"]
@@ -62,3 +63,14 @@ def test_joins_each_draw_with_its_success(tmp_path, monkeypatch):
     assert "| 2 | 1 |" in (tmp_path / "again" / "report.md").read_text()
     with pytest.raises(SystemExit):
         main(["--out", str(tmp_path / "x"), "--checkpoint", str(tmp_path)])
+
+
+def test_a_robustness_summary_of_other_draws_or_labels_is_refused(tmp_path, capsys):
+    results = {"checkpoints": {"omnid": {"rows": []}}}
+    write_run_summary(
+        tmp_path / "r.json", RunSummary("omnid-robustness", {"perturbation_seed": 3}, results=results)
+    )
+    with pytest.raises(ValueError, match="perturbation_seed: expected 0, got 3"):
+        calibration_shift.draw_successes(tmp_path / "r.json", "omnid", 0)
+    with pytest.raises(ValueError, match=r"--label: expected one of \['omnid'\], got 'dp'"):
+        calibration_shift.draw_successes(tmp_path / "r.json", "dp", 3)

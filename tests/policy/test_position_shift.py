@@ -69,10 +69,16 @@ def test_training_with_a_shift_is_finite_and_off_outside_training(monkeypatch):
 
 
 def test_the_head_must_be_able_to_command_the_shifted_targets():
-    # 5 cm over a 40 cm MIN_MAX range is 0.25 normalised units: a clip at 1.0 would cut them off.
+    # 5 cm over a 40 cm MIN_MAX range is 0.25 normalised units: a clip at 1.0 would cut them off. Checked
+    # when training, so that a checkpoint loaded for inference with other statistics is not refused.
+    policy = OmniDPolicy(tiny_config(position_shift_m=0.05), dataset_stats=stats())
     with pytest.raises(ValueError, match=r"clip_sample_range >= 1.25"):
-        OmniDPolicy(tiny_config(position_shift_m=0.05), dataset_stats=stats())
-    OmniDPolicy(tiny_config(position_shift_m=0.05, clip_sample=False), dataset_stats=stats())
+        policy.forward(random_batch(policy.config))
+    policy.eval()
+    with torch.no_grad():
+        policy.forward(random_batch(policy.config))
+    unclipped = OmniDPolicy(tiny_config(position_shift_m=0.05, clip_sample=False), dataset_stats=stats())
+    assert torch.isfinite(unclipped.forward(random_batch(unclipped.config))[0])
 
 
 def test_without_stats_the_policy_loads_but_cannot_train_with_a_shift(tmp_path):
@@ -118,4 +124,6 @@ def test_make_policy_gives_the_shift_the_datasets_statistics(tmp_path):
     action = dataset.meta.stats["action"]
     expected = 2 / (torch.as_tensor(action["max"][:2]) - torch.as_tensor(action["min"][:2])).float()
     assert torch.allclose(policy.action_shift_scale, expected)
-    assert policy.state_shift_scale.shape == (2,)
+    state = dataset.meta.stats["observation.state"]
+    expected = 2 / (torch.as_tensor(state["max"][:2]) - torch.as_tensor(state["min"][:2])).float()
+    assert torch.allclose(policy.state_shift_scale, expected)
