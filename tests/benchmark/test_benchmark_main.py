@@ -508,3 +508,21 @@ def test_summary_is_kept_after_every_evaluation(monkeypatch, tmp_path):
     ]
     assert bench.main(argv) == 0
     assert seen == list(range(len(seen))) and len(seen) == 2
+
+
+def test_position_validation_reports_its_variants_and_the_choice(monkeypatch, tmp_path):
+    """The position validation end to end with the tools stood in: six models trained, each evaluated in
+    ID and the four bands (10 episodes, env seeds 80000 ...); the report's curve has a row per variant and
+    the rule's choice per method."""
+    calls: list[str] = []
+    rates = {"omnid": 30.0, "omnid_clip2": 40.0, "omnid_clip2_shift5": 60.0, "omnid_clip2_shift10": 70.0}
+    rates |= {"diffusion": 20.0, "diffusion_clip2": 20.0}
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates))
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    assert bench.main(["--profile", "position-validation", "--out", str(tmp_path / "v")]) == 0
+    assert calls.count("lerobot-train") == 6 and calls.count("lerobot-eval") == 30
+    report = (tmp_path / "v" / "report.md").read_text()
+    curve = "| OmniD clip 2, shift 10 cm |" + " **70.0 (39.7-89.2)** |" * 4 + " 70.0 (54.6-81.9) |"
+    assert curve in report  # the curve: a row per variant, its four bands and the area
+    chosen = [line.split(" | ")[0] for line in report.splitlines() if "**chosen**" in line]
+    assert chosen == ["| OmniD clip 2, shift 10 cm", "| DP"]  # DP's variant only ties it
