@@ -21,7 +21,7 @@ import pytest
 
 from lerobot_omnid.measure.across_tasks import above
 from lerobot_omnid.measure.results import EvalRecord, check_comparable, collect, merge, read_summary
-from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
+from lerobot_omnid.measure.stats import fisher_exact, mantel_haenszel, wilson_interval
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
@@ -268,6 +268,12 @@ SIX_TASKS_SUMMARY = "six_tasks_cpu2.json"
 SIX_TASK_METHODS = ("omnid", "diffusion", "act", "vqbet")
 SIX_TASK_SENTENCE = r"on `(\w+)` ID " + ", ".join([r"(\d+)/(\d+) vs (\d+)/(\d+)", *[r"(\d+)/(\d+)"] * 2])
 """The headline's six-task sentence: a task's ID counts of OmniD, DP, ACT and VQ-BeT."""
+SIX_TASK_POOLED = (
+    r"pooled over (\d) tasks OmniD (\d+)/(\d+) vs DP (\d+)/(\d+) \(p = ([\d.<\s]+)\), "
+    r"ACT (\d+)/(\d+), VQ-BeT (\d+)/(\d+)"
+)
+"""The headline's pooled six-task sentence: tasks, the four methods' ID counts over them, OmniD vs DP's
+Mantel-Haenszel p."""
 
 
 def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
@@ -280,6 +286,22 @@ def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
         if stated != truth:
             errors.append(f"headline: six tasks, {task}: stated {stated}, the summary gives {truth}")
     text = " ".join(headline_section(readme).split())
+    if m := claim(text, SIX_TASK_POOLED, errors):
+        cells = collect(records)
+        tasks = sorted({t for model, t, setting in cells if setting == "id" and model == "omnid"})
+        pooled = [
+            sum(astuple(cells[(model, t, "id")])[i] for t in tasks)
+            for model in SIX_TASK_METHODS
+            for i in (0, 1)
+        ]
+        stated = [int(x) for x in (m[2], m[3], m[4], m[5], *m.groups()[6:])]
+        if (int(m[1]), stated) != (len(tasks), pooled):
+            errors.append(f"headline: pooled {m[1]} tasks {stated}; the summary: {len(tasks)} tasks {pooled}")
+        strata = [
+            (*astuple(cells[("omnid", t, "id")])[:2], *astuple(cells[("diffusion", t, "id")])[:2])
+            for t in tasks
+        ]
+        errors += p_errors("headline: six tasks pooled p", m[6], mantel_haenszel(strata))
     for task in re.findall(r"on `(\w+)` none is above its blind control", text):
         cells, blind = collect(records), collect(records, "blind")
         for model in SIX_TASK_METHODS:
@@ -295,6 +317,8 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     for old, new in (
         ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
         ("on `add_condiment` none", "on `select_apple` none"),  # OmniD, DP and ACT are above theirs there
+        ("OmniD 38/90 vs DP 28/90", "OmniD 38/90 vs DP 27/90"),
+        ("(p = 0.13), ACT", "(p = 0.03), ACT"),
     ):
         edited = readme.replace(old, new)
         assert edited != readme and six_task_errors(edited, records) != []
