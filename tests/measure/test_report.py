@@ -9,10 +9,9 @@ from pathlib import Path
 
 import pytest
 
-import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark.methods import CONTROL_LABELS, CONTROLS
 from lerobot_omnid.benchmark.outputs import BANDS_CM
-from lerobot_omnid.benchmark.plan import BANDS, SETTINGS, TASK0, TASK1, TRAIN_SEED, control_setting
+from lerobot_omnid.benchmark.plan import BANDS, LABELS, SETTINGS, TASK0, TASK1, TRAIN_SEED, control_setting
 from lerobot_omnid.measure.charts import bar_chart, position_curve_chart
 from lerobot_omnid.measure.report import (
     ablation_table,
@@ -27,8 +26,6 @@ from lerobot_omnid.measure.report import (
 )
 from lerobot_omnid.measure.results import EvalEntry, EvalRecord, collect, record_of
 from lerobot_omnid.measure.stats import fisher_exact
-
-LABELS = bench.LABELS
 
 
 def _write_eval(path: Path, rate: float, n: int) -> Path:
