@@ -175,6 +175,7 @@ class OmniDPolicy(PreTrainedPolicy):
         # position_shift_m in the normalised units of the state's and the action's TCP x, y (empty: unknown).
         self.register_buffer("state_shift_scale", torch.zeros(0), persistent=False)
         self.register_buffer("action_shift_scale", torch.zeros(0), persistent=False)
+        self._shift_reach: float | None = None  # the largest normalised action |x|, |y| a shift asks for
         if config.position_shift_m > 0:
             self._set_shift_scales(kwargs.get("dataset_stats"))
         # The cameras' matrices for the backbone's input size: parsed from the config once, kept as buffers
@@ -519,16 +520,17 @@ class OmniDPolicy(PreTrainedPolicy):
         ]
         if None not in scales:
             self.state_shift_scale, self.action_shift_scale = scales
+            self._shift_reach = 1 + c.position_shift_m * float(scales[1].max())  # once, not per step
 
     def _check_shift_reach(self) -> None:
         """Training with a shift needs the units, and a head that can command the shifted action targets."""
         c = self.config
-        if self.action_shift_scale.numel() == 0:
+        reach = self._shift_reach
+        if reach is None:
             raise ValueError(
                 "`position_shift_m` > 0 needs the dataset's statistics to convert metres to normalised "
                 "units: make the policy with `dataset_stats` (lerobot-train's make_policy passes them)"
             )
-        reach = 1 + c.position_shift_m * float(self.action_shift_scale.max())
         clipped = NormalizationMode(c.normalization_mapping["ACTION"]) is NormalizationMode.MIN_MAX
         if clipped and c.clip_sample and c.clip_sample_range < reach:
             raise ValueError(
