@@ -198,7 +198,7 @@ def method_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
     raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
 
 
-def finetune_flags(method: str, p: BenchmarkProfile) -> list[Flag]:
+def finetune_flags(method: str) -> list[Flag]:
     """Options that turn a B-E checkpoint (given with ``--policy.path``) into a camera-A policy."""
     if method == "omnid":
         why = "camera A only: its calibration comes from the dataset, every weight from the checkpoint"
@@ -251,6 +251,70 @@ POSITION_VARIANTS = (
 )
 """The position validation's candidates beside OmniD and DP as trained
 (docs/benchmark.md#position-its-protocol)."""
+
+
+SINGLE_CAMERA = Variant(
+    "omnid_single_camera",
+    "omnid",
+    "OmniD single-camera pre-training",
+    (
+        (
+            "--policy.single_camera_rate=0.5",
+            "half of the training samples fused from one random camera: the OFG learns to lift the scene "
+            "from a single view, as it must from a new camera",
+        ),
+    ),
+)
+"""OmniD pre-trained to lift from one view: a start of the new-camera recipes."""
+
+
+@dataclass(frozen=True)
+class FewshotRecipe:
+    """How a B-E model of task 0 is fine-tuned on the camera-A episodes. The profile's own recipe (the
+    paper's: ``finetune_steps`` at the training learning rate, every weight trained, from the method as
+    trained) has the name ""; any other is chosen on validation (``lerobot_omnid.benchmark.new_camera``)
+    and its models are table rows of their own, ``<method>_<name>``."""
+
+    name: str
+    label: str  # e.g. "1000 steps"
+    steps: int | None = None  # None: the profile's finetune_steps
+    lr: float | None = None  # None: the method's training learning rate
+    frozen: tuple[str, ...] = ()  # OmniD only: --policy.frozen_modules
+    replay: bool = False  # OmniD only: the camera-A episodes merged with as many replayed B-E ones
+    start: str = ""  # OmniD only: the variant it starts from ("": the method as trained)
+
+    def for_method(self, method: str) -> FewshotRecipe:
+        """The recipe as ``method`` follows it: OmniD all of it; the others its steps and learning rate
+        (LeRobot's policies have no option to freeze parts, and take their cameras side by side, so they
+        cannot leave a camera out per sample as replay needs)."""
+        if method == "omnid":
+            return self
+        return FewshotRecipe(self.name, self.label, self.steps, self.lr)
+
+
+PAPER_RECIPE = FewshotRecipe("", "the paper's fine-tuning")
+
+
+def fewshot_model(method: str, recipe: FewshotRecipe) -> str:
+    """The table row of ``method`` fine-tuned by ``recipe``: the method's own for the profile's recipe."""
+    return f"{method}_{recipe.name}" if recipe.name else method
+
+
+def recipe_flags(method: str, recipe: FewshotRecipe) -> list[Flag]:
+    """Options of ``method``'s fine-tuning by ``recipe`` (its ``for_method`` form), beyond the path of the
+    checkpoint it starts from."""
+    changes: list[Flag] = []
+    if recipe.replay:
+        cameras = json_list((*CAMERA_A, *TRAIN_CAMERAS))
+        why = "cameras A-E: each replayed frame shows the policy B-E, each camera-A frame camera A alone"
+        changes.append((f"--policy.cameras={cameras}", why))
+    if recipe.lr is not None:
+        changes.append((f"--policy.optimizer_lr={recipe.lr:g}", "the recipe's fine-tuning learning rate"))
+    if recipe.frozen:
+        why = "the recipe's parts kept from the B-E model"
+        changes.append(("--policy.frozen_modules=" + json_list(recipe.frozen), why))
+    base = [(f, why) for f, why in finetune_flags(method) if not f.startswith("--policy.path=")]
+    return with_options(base, changes)
 
 
 def variant_flags(variant: Variant, p: BenchmarkProfile) -> list[Flag]:

@@ -23,7 +23,10 @@ The protocol (docs/benchmark.md#a-new-camera-its-protocol), fixed before any of 
    selected recipe and the paper's, OmniD and DP (DP: the same steps and learning rate, every weight
    trained, camera A alone: single-camera pre-training, frozen parts and replay are OmniD's own), 30
    episodes per cell on two disjoint env-seed ranges, blind controls, the probe error beside each model.
-   This module plans the validation; the test phase is not planned yet.
+   This module plans the validation. The test is the benchmark's few-shot phase with the selected recipe
+   beside the paper's (``BenchmarkProfile.fewshot_recipes``; each hypothesis is a
+   :class:`~lerobot_omnid.benchmark.methods.FewshotRecipe`), in a profile committed once it is selected; run
+   with this protocol's ``--out``, it reuses its recordings and pre-trained models (the same commands).
 
 Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``,
 ``<out>/summary.json`` and, once every hypothesis is validated, ``<out>/selection.json``.
@@ -34,16 +37,24 @@ Runs on the experiment engine (resumable; ``--dry-run`` prints every command); w
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS
 
 from lerobot_omnid.benchmark import commands
-from lerobot_omnid.benchmark.methods import CAMERA_A, finetune_flags, method_flags
-from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, MINI, TASK0, TRAIN_SEED
+from lerobot_omnid.benchmark.methods import (
+    CAMERA_A,
+    PAPER_RECIPE,
+    SINGLE_CAMERA,
+    FewshotRecipe,
+    method_flags,
+    recipe_flags,
+    variant_flags,
+)
+from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, MINI, REPLAY, TASK0, TRAIN_SEED, replay_runs
 from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import (
@@ -66,36 +77,25 @@ from lerobot_omnid.measure.results import (
 )
 from lerobot_omnid.measure.stats import wilson_interval
 
-PRETRAINED = {  # name: options added to mini's OmniD
-    "mini": (),
-    "single_camera": ("--policy.single_camera_rate=0.5",),
-}
-
-
-@dataclass(frozen=True)
-class Hypothesis:
-    """A fine-tuning recipe: from which pre-trained model, how many steps, at which learning rate (None:
-    mini's), with which parts frozen (``--policy.frozen_modules``) and whether training episodes of cameras
-    B-E are replayed beside the camera-A ones."""
-
-    pretrained: str
-    steps: int
-    lr: float | None = None
-    frozen: tuple[str, ...] = ()
-    replay: bool = False  # the camera-A episodes mixed with as many replayed B-E episodes (REPLAY_DATA)
-
-
-HYPOTHESES = {
-    "paper": Hypothesis("mini", MINI.finetune_steps),
-    "long": Hypothesis("mini", 1000),
-    "long_low_lr": Hypothesis("mini", 1000, lr=1e-4),
-    "single_camera_long": Hypothesis("single_camera", 1000),
+PRETRAINED = {"mini": "", "single_camera": SINGLE_CAMERA.name}  # name: the variant it is ("": mini's OmniD)
+LONG = 1000  # fine-tuning steps of the longer recipes
+HYPOTHESES = {  # name: the recipe (the benchmark's few-shot recipes are these, once one is selected)
+    "paper": dataclasses.replace(PAPER_RECIPE, name="paper", steps=MINI.finetune_steps),
+    "long": FewshotRecipe("long", f"{LONG} steps", LONG),
+    "long_low_lr": FewshotRecipe("long_low_lr", f"{LONG} steps at lr 1e-4", LONG, lr=1e-4),
+    "single_camera_long": FewshotRecipe(
+        "single_camera_long", f"{LONG} steps from single-camera pre-training", LONG, start=SINGLE_CAMERA.name
+    ),
     # The plane is meant to be camera-agnostic: keep what maps it to actions, adapt only the lifting.
-    "long_frozen_head": Hypothesis("mini", 1000, frozen=("head",)),
+    "long_frozen_head": FewshotRecipe(
+        "long_frozen_head", f"{LONG} steps, head frozen", LONG, frozen=("head",)
+    ),
     # The ResNet's features are generic: adapt the OFG and the head only.
-    "long_frozen_backbone": Hypothesis("mini", 1000, frozen=("backbone",)),
+    "long_frozen_backbone": FewshotRecipe(
+        "long_frozen_backbone", f"{LONG} steps, backbone frozen", LONG, frozen=("backbone",)
+    ),
     # Fine-tuning on camera A alone may make the plane forget B-E: keep showing them.
-    "long_replay": Hypothesis("mini", 1000, replay=True),
+    "long_replay": FewshotRecipe("long_replay", f"{LONG} steps with B-E replayed", LONG, replay=True),
 }
 VALIDATION_SEED = 70_000
 VALIDATION_EPISODES = 20
@@ -103,16 +103,16 @@ TIE_MARGIN = 1
 SELECTION_FILE = "selection.json"
 PROTOCOL = "new_camera"
 TRAIN_DATA, FEWSHOT_DATA = f"{TASK0}_bcde", f"{TASK0}_a_fewshot"  # the benchmark's folder names
-ALL_CAMERAS = (*CAMERA_A, *TRAIN_CAMERAS)
-REPLAY_DATA = f"{TASK0}_a_fewshot_replay"
-"""The replay hypotheses' fine-tuning set: the few-shot episodes and as many training episodes (env seeds
-from 0, replayed), both recorded with cameras A-E, merged; a per-frame column (``omnid-record
---hidden-cameras``) shows OmniD camera A alone in the first and B-E in the second."""
+REPLAY_DATA = FEWSHOT_DATA + REPLAY  # the replay hypotheses' fine-tuning set, the benchmark's
+
+
+def pretrained_name(recipe: FewshotRecipe) -> str:
+    return next(name for name, variant in PRETRAINED.items() if variant == recipe.start)
 
 
 def pretrained_dir(out: Path, name: str) -> Path:
-    """The benchmark's own folder for ``mini``, ``train_<name>/`` for the others."""
-    return out / ("train" if name == "mini" else f"train_{name}") / "omnid" / TASK0
+    """The benchmark's own folder of the model (a profile with the variant trains it there too)."""
+    return out / "train" / (PRETRAINED[name] or "omnid") / TASK0
 
 
 def finetuned_dir(out: Path, hypothesis: str) -> Path:
@@ -137,26 +137,15 @@ def records(out: Path) -> list[Run]:
         Run(f"record/{FEWSHOT_DATA}", "record", tuple(cmd_fewshot), fewshot, episodes=p.fewshot_episodes),
     ]
     if any(recipe.replay for recipe in HYPOTHESES.values()):
-        parts = []
-        for name, seed, hidden in (("a", FEWSHOT_SEED, TRAIN_CAMERAS), ("bcde", 0, CAMERA_A)):
-            root = out / "data" / f"{REPLAY_DATA}_{name}"
-            cmd = commands.record_command(
-                TASK0, p.fewshot_episodes, ALL_CAMERAS, p.image_size, root, seed=seed
-            )
-            cmd += ["--hidden-cameras", ",".join(hidden)]
-            runs.append(Run(f"record/{root.name}", "record", tuple(cmd), root, episodes=p.fewshot_episodes))
-            parts.append(root)
-        merged = out / "data" / REPLAY_DATA
-        needs = tuple(f"record/{part.name}" for part in parts)
-        runs.append(
-            Run(f"merge/{REPLAY_DATA}", "merge", tuple(commands.merge_command(parts, merged)), merged, needs)
-        )
+        runs += replay_runs(p, out, TASK0)
     return runs
 
 
 def pretrain(out: Path, name: str) -> list[str]:
     flags = ["--policy.type=omnid", "--policy.device=cpu", "--policy.push_to_hub=false"]
-    flags += [flag for flag, _ in method_flags("omnid", MINI)] + list(PRETRAINED[name])
+    variant = SINGLE_CAMERA if PRETRAINED[name] else None
+    options = variant_flags(variant, MINI) if variant else method_flags("omnid", MINI)
+    flags += [flag for flag, _ in options]
     return commands.train_command(
         out / "data" / TRAIN_DATA,
         pretrained_dir(out, name),
@@ -169,16 +158,9 @@ def pretrain(out: Path, name: str) -> list[str]:
 
 def finetune(out: Path, hypothesis: str) -> list[str]:
     recipe = HYPOTHESES[hypothesis]
-    flags = [f"--policy.path={pretrained_dir(out, recipe.pretrained) / CHECKPOINT}", "--policy.device=cpu"]
-    flags.append("--policy.push_to_hub=false")
-    if recipe.replay:
-        flags.append("--policy.cameras=" + commands.json_list(ALL_CAMERAS))
-    else:
-        flags += [flag for flag, _ in finetune_flags("omnid", MINI)]
-    if recipe.lr is not None:
-        flags.append(f"--policy.optimizer_lr={recipe.lr:g}")
-    if recipe.frozen:
-        flags.append("--policy.frozen_modules=" + commands.json_list(recipe.frozen))
+    start = pretrained_dir(out, pretrained_name(recipe)) / CHECKPOINT
+    flags = [f"--policy.path={start}", "--policy.device=cpu", "--policy.push_to_hub=false"]
+    flags += [flag for flag, _ in recipe_flags("omnid", recipe)]
     return commands.train_command(
         out / "data" / (REPLAY_DATA if recipe.replay else FEWSHOT_DATA),
         finetuned_dir(out, hypothesis),
@@ -229,7 +211,7 @@ def protocol(out: Path) -> list[Run]:
     for hypothesis, recipe in HYPOTHESES.items():
         name = str(finetuned_dir(out, hypothesis).relative_to(out))
         data = f"merge/{REPLAY_DATA}" if recipe.replay else runs[1].name
-        needs = (str(pretrained_dir(out, recipe.pretrained).relative_to(out)), data)
+        needs = (str(pretrained_dir(out, pretrained_name(recipe)).relative_to(out)), data)
         runs.append(
             Run(name, "train", tuple(finetune(out, hypothesis)), finetuned_dir(out, hypothesis), needs)
         )
@@ -267,7 +249,7 @@ def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunS
         "task": TASK0,
         "validation_seed": VALIDATION_SEED,
         "validation_episodes": VALIDATION_EPISODES,
-        "hypotheses": {h: asdict(recipe) for h, recipe in HYPOTHESES.items()},
+        "hypotheses": {h: dataclasses.asdict(recipe) for h, recipe in HYPOTHESES.items()},
     }
     selected = select(validated) if len(validated) == len(HYPOTHESES) else None
     return RunSummary(PROTOCOL, settings, evaluations, {"selected": selected}, commit)
@@ -293,7 +275,7 @@ def write_report(summary: RunSummary, path: Path) -> None:
         if hypothesis:
             lr = "mini's lr" if hypothesis["lr"] is None else f"lr {hypothesis['lr']:g}"
             frozen = ", ".join(hypothesis.get("frozen", ()))
-            pretrained = hypothesis["pretrained"]
+            pretrained = pretrained_name(FewshotRecipe(**hypothesis))
             tuning = f"{hypothesis['steps']} steps, {lr}" + (f", {frozen} frozen" if frozen else "")
         else:
             pretrained, tuning = model.removeprefix("zero_shot_"), "none (zero-shot)"

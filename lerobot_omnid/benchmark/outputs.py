@@ -22,9 +22,11 @@ from lerobot_omnid.benchmark.methods import (
     VQBET_CAMERA,
     ablation_flags,
     control_flags,
+    fewshot_model,
     finetune_flags,
     method_controls,
     method_flags,
+    recipe_flags,
 )
 from lerobot_omnid.benchmark.plan import (
     BACKGROUND_OODS,
@@ -106,6 +108,11 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         f"camera-A episodes (env seeds from {FEWSHOT_SEED}) of {TASK0} and of {TASK1}, evaluated with "
         "camera A, beside its blind control (the fine-tuned checkpoint with camera A turned away in its "
         "calibration for OmniD, black for the others)."
+        + "".join(
+            f" Also by the recipe `{r.name}` ({r.label}), its models a row of their own."
+            for r in p.fewshot_recipes
+            if r.name
+        )
         if p.fewshot
         else "- Few-shot fine-tuning: not in this profile.",
         f"- One model for every task: OmniD and DP trained on the {len(tasks)} tasks' training sets together "
@@ -142,7 +149,15 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         seen.update(v.flags)
     if p.fewshot:
         for m in p.methods:
-            rows += [(f"{labels[m]} fine-tune", f, why) for f, why in finetune_flags(m, p)]
+            base_tuning = finetune_flags(m)
+            rows += [(f"{labels[m]} fine-tune", f, why) for f, why in base_tuning]
+            for recipe in (r for r in p.method_recipes(m) if r.name):
+                who = labels[fewshot_model(m, recipe)]
+                if recipe.steps:
+                    rows.append((who, f"--steps={recipe.steps}", "the recipe's fine-tuning steps"))
+                if recipe.start:
+                    rows.append((who, f"--policy.path=<{labels[recipe.start]}>", "the recipe's start"))
+                rows += [(who, f, why) for f, why in recipe_flags(m, recipe) if (f, why) not in base_tuning]
     lines += [f"| {who} | `{flag}` | {why} |" for who, flag, why in rows]
     notes = {
         "act": "ACT: one observation step (the only value LeRobot's ACT supports); without pretrained "
@@ -171,12 +186,14 @@ def eval_entry(run: Run) -> results.EvalEntry:
 
 def ordered_models(p: BenchmarkProfile, records: Sequence[results.EvalRecord]) -> tuple[str, ...]:
     """The profile's methods and any other method found in merged records, in the paper's order, each
-    followed by those of the profile's variants of it that have records."""
+    followed by those of the profile's variants and few-shot recipes of it that have records."""
     found = {r.key[0] for r in records}
     models = []
     for m in METHODS:
         models += [m] if m in p.methods or m in found else []
         models += [v.name for v in p.variants if v.method == m and v.name in found]
+        tuned = (fewshot_model(m, r) for r in p.fewshot_recipes if r.name)
+        models += [t for t in tuned if t in found]
     return tuple(models)
 
 

@@ -35,14 +35,17 @@ from lerobot_omnid.benchmark.methods import (
     CAMERA_A,
     CONTROLS,
     METHODS,
+    PAPER_RECIPE,
     POSITION_VARIANTS,
     VQBET_CAMERA,
+    FewshotRecipe,
     Variant,
     ablation_flags,
     control_flags,
-    finetune_flags,
+    fewshot_model,
     method_controls,
     method_flags,
+    recipe_flags,
     variant_flags,
 )
 from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
@@ -70,6 +73,10 @@ BANDS = tuple(POSITION_BANDS)  # position_band_1 .. _4: the position-shift curve
 SETTINGS = ("id", "position_ood", *BACKGROUND_OODS, *BANDS)
 FEWSHOT = "fewshot_a"
 """Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
+REPLAY = "_replay"
+"""Suffix of a task's replay fine-tuning set: its camera-A few-shot episodes and as many training episodes
+(env seeds from 0, replayed), both recorded with cameras A-E, merged; a per-frame column (``omnid-record
+--hidden-cameras``) shows OmniD camera A alone in the first and B-E in the second."""
 TRAIN_SEED = 1000  # lerobot-train --seed (LeRobot's default): same init RNG and batch order for every method
 EVAL_SEED_STRIDE = 1000  # eval seed k runs env seeds k*1000 ... k*1000 + episodes - 1
 FEWSHOT_SEED = 100_000  # first env seed of the few-shot recordings (training sets start at 0)
@@ -109,9 +116,11 @@ class BenchmarkProfile:
     multitask: bool = False  # also one OmniD and one DP trained on every task together (MULTITASK_METHODS)
     controls: tuple[str, ...] = CONTROLS  # the controls planned, of each method's (``method_controls``)
     variants: tuple[Variant, ...] = ()  # methods with other options on task 0, each its own table row
+    fewshot_recipes: tuple[FewshotRecipe, ...] = (PAPER_RECIPE,)  # with ``fewshot``: how each model is tuned
 
     def __post_init__(self) -> None:
-        """Variants: distinct names that are no method's or other model's, of a method the profile trains."""
+        """Variants: distinct names that are no method's or other model's, of a method the profile trains.
+        Few-shot recipes: distinct names, each starting from the method as trained or an OmniD variant."""
         names = [v.name for v in self.variants]
         for v in self.variants:
             if v.method not in self.methods or v.name in LABELS or names.count(v.name) > 1:
@@ -119,11 +128,34 @@ class BenchmarkProfile:
                     f"variants: expected distinct new names of methods among {list(self.methods)}, got "
                     f"{v.name!r} of {v.method!r}"
                 )
+        recipes = [r.name for r in self.fewshot_recipes]
+        starts = ["", *(v.name for v in self.variants if v.method == "omnid")]
+        for r in self.fewshot_recipes:
+            if recipes.count(r.name) > 1 or r.start not in starts:
+                raise ValueError(
+                    f"fewshot_recipes: expected distinct names, each starting from one of {starts}, got "
+                    f"{r.name!r} starting from {r.start!r}"
+                )
 
     @property
     def labels(self) -> dict[str, str]:
-        """The table label of every model: the methods' and the variants'."""
-        return {**LABELS, **{v.name: v.label for v in self.variants}}
+        """The table label of every model: the methods', the variants' and the few-shot recipes'."""
+        recipes = {
+            fewshot_model(m, r): f"{LABELS[m]} {r.label}"
+            for m in self.methods
+            for r in self.fewshot_recipes
+            if r.name
+        }
+        return {**LABELS, **{v.name: v.label for v in self.variants}, **recipes}
+
+    def method_recipes(self, method: str) -> tuple[FewshotRecipe, ...]:
+        """The few-shot recipes as ``method`` follows them (:meth:`FewshotRecipe.for_method`), a recipe
+        that would repeat an earlier one's fine-tuning left out."""
+        found: dict[tuple, FewshotRecipe] = {}
+        for recipe in self.fewshot_recipes:
+            own = recipe.for_method(method)
+            found.setdefault(dataclasses.astuple(dataclasses.replace(own, name="", label="")), own)
+        return tuple(found.values())
 
     def for_task(self, task: str) -> BenchmarkProfile:
         """This profile with ``task``'s training steps (``task_steps``), which size every method's run on
@@ -279,6 +311,8 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     fewshot_tasks = (TASK0, TASK1) if p.fewshot and TASK0 in tasks else ()
     for task in fewshot_tasks:
         record(f"{task}_a_fewshot", task, CAMERA_A, p.fewshot_episodes, seed=FEWSHOT_SEED)
+        if "omnid" in p.methods and any(r.replay for r in p.fewshot_recipes):
+            runs += replay_runs(p, out, task)
     for setting in heldout_settings(p, tasks):
         record(
             heldout_dataset(TASK0, setting), TASK0, TRAIN_CAMERAS, p.heldout_episodes, HELDOUT_SEED, setting
@@ -286,6 +320,22 @@ def build_plan(p: BenchmarkProfile, out: Path, tasks: Sequence[str]) -> list[Run
     for train_seed in p.train_seeds:
         runs += plan_models(p, out, tasks, train_seed, fewshot_tasks)
     return plan(runs, out)
+
+
+def replay_runs(p: BenchmarkProfile, out: Path, task: str) -> list[Run]:
+    """The recordings and the merge of ``task``'s replay fine-tuning set (``REPLAY``)."""
+    runs, parts = [], []
+    every = (*CAMERA_A, *TRAIN_CAMERAS)
+    for part, seed, hidden in (("a", FEWSHOT_SEED, TRAIN_CAMERAS), ("bcde", 0, CAMERA_A)):
+        root = out / "data" / f"{task}_a_fewshot{REPLAY}_{part}"
+        cmd = record_command(task, p.fewshot_episodes, every, p.image_size, root, seed=seed)
+        cmd += ["--hidden-cameras", ",".join(hidden)]
+        runs.append(Run(f"record/{root.name}", "record", tuple(cmd), root, episodes=p.fewshot_episodes))
+        parts.append(root)
+    merged = out / "data" / f"{task}_a_fewshot{REPLAY}"
+    needs = tuple(f"record/{part.name}" for part in parts)
+    runs.append(Run(f"merge/{merged.name}", "merge", tuple(merge_command(parts, merged)), merged, needs))
+    return runs
 
 
 def multitask(p: BenchmarkProfile, tasks: Sequence[str]) -> bool:
@@ -324,12 +374,13 @@ def plan_models(
     def train(
         folder: str, model: str, task: str, dataset: str, flags: list[str], steps: int, needs=()
     ) -> Run:
-        """Train ``model`` on ``dataset`` (made by its "record" run, or the multi-task "merge")."""
+        """Train ``model`` on ``dataset`` (made by its "record" run, or a "merge")."""
         output = root / folder / model / task
         data = out / "data" / dataset
         cmd = train_command(data, output, flags, steps, p.batch_size, p.num_workers, seed=train_seed)
         name = f"{prefix}{folder}/{model}/{task}"
-        made_by = f"merge/{dataset}" if dataset == MULTITASK_DATASET else f"record/{dataset}"
+        merged = dataset == MULTITASK_DATASET or dataset.endswith(REPLAY)
+        made_by = f"merge/{dataset}" if merged else f"record/{dataset}"
         run = Run(name, "train", tuple(cmd), output, (made_by, *needs), train_seed=train_seed)
         runs.append(run)
         return run
@@ -465,22 +516,29 @@ def plan_models(
             )
             evaluate(trained, name, TASK0, ("id",), CAMERA_A if name == "omnid_cam_a" else TRAIN_CAMERAS)
     task0_folder = train_folder(p, p.for_task(TASK0).steps)
-    for method in p.methods:
-        start = root / task0_folder / method / TASK0 / CHECKPOINT_SUBDIR
-        start_run = f"{prefix}{task0_folder}/{method}/{TASK0}"
-        if method != "omnid" and fewshot_tasks:  # a copy whose image input is camera A
-            src, start = start, root / "finetune" / method / "start_cam_a"
+    for method in p.methods if fewshot_tasks else ():
+        if method != "omnid":  # a copy whose image input is camera A
+            src = root / task0_folder / method / TASK0 / CHECKPOINT_SUBDIR
+            copy = root / "finetune" / method / "start_cam_a"
             cmd = [sys.executable, "-m", "lerobot_omnid.benchmark.checkpoint_cameras", "--src", str(src)]
-            cmd += ["--dst", str(start), "--cameras", ",".join(CAMERA_A)]
+            cmd += ["--dst", str(copy), "--cameras", ",".join(CAMERA_A)]
             name = f"{prefix}prepare/{method}/cam_a"
-            runs.append(Run(name, "prepare", tuple(cmd), start, (start_run,), train_seed=train_seed))
-            start_run = runs[-1].name
-        for task in fewshot_tasks:
-            flags = [f"--policy.path={start}", f"--policy.device={p.device}", "--policy.push_to_hub=false"]
-            flags += [f for f, _ in finetune_flags(method, p) if not f.startswith("--policy.path=")]
-            dataset = f"{task}_a_fewshot"
-            tuned = train("finetune", method, task, dataset, flags, p.finetune_steps, needs=(start_run,))
-            evaluate(tuned, method, task, (FEWSHOT,), CAMERA_A)
-            # One camera: blind only (no other camera's calibration to permute).
-            controls(tuned, method, task, (FEWSHOT,), CAMERA_A, ("blind",), model=FEWSHOT)
+            needs = (f"{prefix}{task0_folder}/{method}/{TASK0}",)
+            runs.append(Run(name, "prepare", tuple(cmd), copy, needs, train_seed=train_seed))
+        for recipe in p.method_recipes(method):
+            model = fewshot_model(method, recipe)
+            if method != "omnid":
+                start, start_run = copy, name
+            else:
+                start_run = f"{prefix}{task0_folder}/{recipe.start or method}/{TASK0}"
+                start = root / task0_folder / (recipe.start or method) / TASK0 / CHECKPOINT_SUBDIR
+            for task in fewshot_tasks:
+                flags = [f"--policy.path={start}", f"--policy.device={p.device}"]
+                flags += ["--policy.push_to_hub=false", *(f for f, _ in recipe_flags(method, recipe))]
+                dataset = f"{task}_a_fewshot" + (REPLAY if recipe.replay else "")
+                steps = recipe.steps or p.finetune_steps
+                tuned = train("finetune", model, task, dataset, flags, steps, needs=(start_run,))
+                evaluate(tuned, model, task, (FEWSHOT,), CAMERA_A)
+                # One camera: blind only (no other camera's calibration to permute).
+                controls(tuned, method, task, (FEWSHOT,), CAMERA_A, ("blind",), model=FEWSHOT, key=model)
     return runs

@@ -5,6 +5,7 @@ tests/e2e/test_omnid_benchmark.py.)"""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -14,8 +15,9 @@ import pytest
 from omnid_testing import by_name, flag
 
 import lerobot_omnid.benchmark.benchmark as bench
+from lerobot_omnid.benchmark import new_camera
 from lerobot_omnid.benchmark import plan as plan_module
-from lerobot_omnid.benchmark.methods import ABLATIONS
+from lerobot_omnid.benchmark.methods import ABLATIONS, PAPER_RECIPE
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, TASK1, TRAIN_SEED, build_plan
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import CHECKPOINT
@@ -90,6 +92,26 @@ def test_fewshot_report_has_each_fine_tuned_models_blind_control(monkeypatch, tm
             ["| DP", "blind", "fewshot_a", "2/10 (5.7-51.0 %)", "0/10 (0.0-27.8 %)"],
         ]
     assert calls.count("control_calibration") == 5  # task 0's three, one per fine-tuned OmniD
+
+
+def test_report_has_a_row_per_recipe_beside_its_blind_control(monkeypatch, tmp_path):
+    """End to end with the tools stood in: every recipe's model in the few-shot blind-control table."""
+    recipes = (PAPER_RECIPE, new_camera.HYPOTHESES["long_frozen_head"])
+    tuned = dataclasses.replace(PROFILES["mini-fewshot"], fewshot_recipes=recipes)
+    monkeypatch.setitem(PROFILES, "mini-fewshot", tuned)
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    rates = {"omnid": 60.0, "omnid_long_frozen_head": 80.0, "omnid_long_frozen_head/blind": 10.0}
+    monkeypatch.setattr(engine, "run_logged", _fake_tools([], rates))
+    assert bench.main(["--profile", "mini-fewshot", "--out", str(tmp_path)]) == 0
+    report = (tmp_path / "report.md").read_text()
+    section = report.split(f"## Few-shot on camera A, {TASK1}: each fine-tuned model against its blind")[1]
+    table = section.split("\n\n")[1].splitlines()
+    rows = [line.split(" | ")[:5] for line in table if "| fewshot_a |" in line]
+    label = "OmniD 1000 steps, head frozen"
+    omnid = [f"| {label}", "blind", "fewshot_a", "8/10 (49.0-94.3 %)", "1/10 (1.8-40.4 %)"]
+    dp = ["| DP 1000 steps, head frozen", "blind", "fewshot_a", "0/10 (0.0-27.8 %)", "0/10 (0.0-27.8 %)"]
+    assert omnid in rows and dp in rows
+    assert '`--policy.frozen_modules=["head"]`' in report  # its options, with their reasons
 
 
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):

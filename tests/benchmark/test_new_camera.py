@@ -45,16 +45,16 @@ def test_data_and_mini_pretraining_are_the_benchmarks_own_runs(tmp_path):
 
 def test_hypotheses_differ_only_where_they_say(tmp_path):
     runs = {r.name: options(r.cmd) for r in nc.protocol(tmp_path)}
-    mini, single = runs["train/omnid/select_apple"], runs["train_single_camera/omnid/select_apple"]
+    mini, single = runs["train/omnid/select_apple"], runs["train/omnid_single_camera/select_apple"]
     assert set(single.items()) - set(mini.items()) == {
         ("--policy.single_camera_rate", "0.5"),
-        ("--output_dir", str(tmp_path / "train_single_camera" / "omnid" / TASK0)),
+        ("--output_dir", str(tmp_path / "train" / "omnid_single_camera" / TASK0)),
     }
     long, low = runs["finetune_validation/long"], runs["finetune_validation/long_low_lr"]
     assert long["--steps"] == low["--steps"] == "1000" and low["--policy.optimizer_lr"] == "0.0001"
     assert "--policy.optimizer_lr" not in long
     single_long = runs["finetune_validation/single_camera_long"]
-    assert single_long["--policy.path"].startswith(str(tmp_path / "train_single_camera"))
+    assert single_long["--policy.path"].startswith(str(tmp_path / "train" / "omnid_single_camera"))
     frozen = runs["finetune_validation/long_frozen_head"]
     assert set(frozen.items()) - set(long.items()) == {
         ("--policy.frozen_modules", '["head"]'),

@@ -1,0 +1,102 @@
+"""Few-shot recipes in a benchmark profile: the profile's own (the paper's) keeps its runs; another recipe
+fine-tunes each method under a row of its own, OmniD all of the recipe, the others its steps and learning
+rate; the new-camera hypotheses, as the benchmark plans them, are the commands validation ran."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+from omnid_testing import by_name, flag
+
+from lerobot_omnid.benchmark import new_camera as nc
+from lerobot_omnid.benchmark.methods import PAPER_RECIPE, SINGLE_CAMERA, FewshotRecipe
+from lerobot_omnid.benchmark.plan import FEWSHOT, PROFILES, TASK0, TASK1, build_plan
+from lerobot_omnid.measure.engine import CHECKPOINT
+
+TUNED = ("long_frozen_head", "single_camera_long", "long_replay")
+RECIPES = (PAPER_RECIPE, *(nc.HYPOTHESES[h] for h in TUNED))
+
+
+def profile(recipes=RECIPES, variants=(SINGLE_CAMERA,)):
+    return dataclasses.replace(PROFILES["mini-fewshot"], fewshot_recipes=recipes, variants=variants)
+
+
+def options(cmd) -> dict[str, str]:
+    return dict(a.partition("=")[::2] for a in cmd[1:] if a.startswith("--") and "=" in a)
+
+
+def test_the_profiles_own_recipe_keeps_its_runs(tmp_path):
+    before = by_name(build_plan(PROFILES["mini-fewshot"], tmp_path, (TASK0,)))
+    after = by_name(build_plan(profile(), tmp_path, (TASK0,)))
+    assert {n: r.cmd for n, r in before.items()} == {n: after[n].cmd for n in before}
+
+
+def test_each_recipe_fine_tunes_a_model_of_its_own(tmp_path):
+    runs = by_name(build_plan(profile(), tmp_path, (TASK0,)))
+    for task in (TASK0, TASK1):
+        frozen = runs[f"finetune/omnid_long_frozen_head/{task}"]
+        assert flag(frozen.cmd, "steps") == "1000" and flag(frozen.cmd, "policy.frozen_modules") == '["head"]'
+        assert flag(frozen.cmd, "policy.path") == str(tmp_path / "train" / "omnid" / TASK0 / CHECKPOINT)
+        evaluation = runs[f"eval/omnid_long_frozen_head/{task}/{FEWSHOT}/seed1"]
+        assert evaluation.result == ("omnid_long_frozen_head", task, FEWSHOT)
+        assert flag(evaluation.cmd, "env.cameras") == "[cam_a]"
+        blind = runs[f"eval_blind/omnid_long_frozen_head/{task}/{FEWSHOT}/seed1"]
+        calibration = runs[f"calibration/omnid_long_frozen_head/{task}/{FEWSHOT}/blind"]
+        assert calibration.needs == (frozen.name,) and blind.result == evaluation.result
+        single = runs[f"finetune/omnid_single_camera_long/{task}"]
+        start = tmp_path / "train" / SINGLE_CAMERA.name / TASK0 / CHECKPOINT
+        assert flag(single.cmd, "policy.path") == str(start)
+        assert single.needs[-1] == f"train/{SINGLE_CAMERA.name}/{TASK0}"
+        replay = runs[f"finetune/omnid_long_replay/{task}"]
+        merged = runs[f"merge/{task}_a_fewshot_replay"]
+        assert merged.name in replay.needs and flag(replay.cmd, "dataset.root") == str(merged.output)
+        assert json.loads(flag(replay.cmd, "policy.cameras")) == ["cam_a", "cam_b", "cam_c", "cam_d", "cam_e"]
+    assert flag(runs[f"train/{SINGLE_CAMERA.name}/{TASK0}"].cmd, "policy.single_camera_rate") == "0.5"
+
+
+def test_dp_follows_a_recipes_steps_and_learning_rate_once(tmp_path):
+    """Frozen parts, replay and single-camera pre-training are OmniD's: for DP the three recipes are one
+    1000-step fine-tuning, planned under the first's name, from its camera-A copy."""
+    runs = by_name(build_plan(profile(), tmp_path, (TASK0,)))
+    tuned = sorted(n for n in runs if n.startswith("finetune/diffusion") and n.endswith(TASK1))
+    assert tuned == [f"finetune/diffusion/{TASK1}", f"finetune/diffusion_long_frozen_head/{TASK1}"]
+    dp = runs[f"finetune/diffusion_long_frozen_head/{TASK1}"].cmd
+    assert flag(dp, "steps") == "1000" and flag(dp, "policy.frozen_modules") is None
+    assert flag(dp, "policy.path") == str(tmp_path / "finetune" / "diffusion" / "start_cam_a")
+    low = nc.HYPOTHESES["long_low_lr"]
+    dp_low = by_name(build_plan(profile((PAPER_RECIPE, low)), tmp_path, (TASK0,)))
+    assert flag(dp_low[f"finetune/diffusion_long_low_lr/{TASK0}"].cmd, "policy.optimizer_lr") == "0.0001"
+    labels = profile().labels
+    assert labels["diffusion_long_frozen_head"] == "DP 1000 steps, head frozen"
+
+
+@pytest.mark.parametrize("hypothesis", sorted(nc.HYPOTHESES))
+def test_a_selected_hypothesis_is_fine_tuned_as_validation_did(hypothesis, tmp_path):
+    """The test phase (the benchmark's few-shot phase with the selected recipe) fine-tunes task 0 with the
+    very options validation used; only the folders differ."""
+    recipe = nc.HYPOTHESES[hypothesis]
+    runs = by_name(build_plan(profile((recipe,)), tmp_path, (TASK0,)))
+    validation = {r.name: r for r in nc.protocol(tmp_path)}[f"finetune_validation/{hypothesis}"]
+    benchmark = options(runs[f"finetune/omnid_{hypothesis}/{TASK0}"].cmd)
+    pretraining = {r.name: r.cmd for r in nc.protocol(tmp_path) if r.kind in ("record", "train", "merge")}
+    assert all(runs[n].cmd == cmd for n, cmd in pretraining.items() if n in runs)  # reused with its --out
+    start = f"train/{recipe.start or 'omnid'}/{TASK0}"
+    assert start in pretraining and start in runs[f"finetune/omnid_{hypothesis}/{TASK0}"].needs
+    assert {k: v for k, v in benchmark.items() if k != "--output_dir"} == {
+        k: v for k, v in options(validation.cmd).items() if k != "--output_dir"
+    }
+
+
+@pytest.mark.parametrize(
+    ("recipes", "variants"),
+    [
+        ((PAPER_RECIPE, PAPER_RECIPE), ()),
+        ((FewshotRecipe("x", "x", 10, start="omnid_other"),), (SINGLE_CAMERA,)),
+        ((nc.HYPOTHESES["single_camera_long"],), ()),
+    ],
+)
+def test_profile_refuses_recipes_it_cannot_plan(recipes, variants):
+    with pytest.raises(ValueError, match="fewshot_recipes: expected distinct names"):
+        profile(recipes, variants)
