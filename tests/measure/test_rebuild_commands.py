@@ -1,5 +1,5 @@
-"""Every rebuild command of docs/results.md, run on the committed summaries alone: each claim's section names
-one, and it must run (no checkpoint, no run folder) and write its table.
+"""Every rebuild command of docs/results.md and docs/results/diagnostics.md, run on the committed summaries
+alone: each section names one, and it must run (no checkpoint, no run folder) and write its table.
 
 The commands are run in this process, through the console scripts' and modules' own ``main`` functions, with
 ``--out`` pointed at a temporary folder; the page's ```` ```bash ```` blocks and inline report commands are
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-RESULTS_PAGE = ROOT / "docs" / "results.md"
+RESULTS_PAGES = (ROOT / "docs" / "results.md", ROOT / "docs" / "results" / "diagnostics.md")
 CONSOLE_SCRIPTS = {  # console script: module whose main(argv) it calls (pyproject.toml's [project.scripts])
     "omnid-benchmark": "lerobot_omnid.benchmark.benchmark",
     "omnid-robustness": "lerobot_omnid.benchmark.robustness",
@@ -28,10 +28,11 @@ CONSOLE_SCRIPTS = {  # console script: module whose main(argv) it calls (pyproje
 
 
 def sections() -> dict[str, list[str]]:
-    """The page's ``##`` sections and the commands in each: its bash blocks (continuation lines joined)
+    """The pages' ``##`` sections and the commands in each: its bash blocks (continuation lines joined)
     and its inline report commands (whole command lines, starting with the program)."""
     found: dict[str, list[str]] = {}
-    for section in re.split(r"^## ", RESULTS_PAGE.read_text(), flags=re.MULTILINE)[1:]:
+    text = "\n".join(page.read_text() for page in RESULTS_PAGES)
+    for section in re.split(r"^## ", text, flags=re.MULTILINE)[1:]:
         title = section.splitlines()[0]
         blocks = re.findall(r"```bash\n(.*?)```", section, re.DOTALL)
         prose = re.sub(r"```.*?```", "", section, flags=re.DOTALL)

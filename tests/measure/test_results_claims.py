@@ -27,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 RESULTS_PAGE = ROOT / "docs" / "results.md"
 HISTORY_PAGE = ROOT / "docs" / "results" / "history.md"
+DIAGNOSTICS_PAGE = ROOT / "docs" / "results" / "diagnostics.md"
 SUMMARIES = ROOT / "docs" / "results"
 HEADLINE_SUMMARIES = ("mini_seed1000-1001_eval30_cpu2.json", "mini_seed1002_eval30_cpu2.json")
 """The three-seed OmniD-vs-DP run: docs/results.md's "In distribution" rebuild command pools these."""
@@ -408,13 +409,13 @@ def link_errors(page: Path, only_into: Sequence[Path] = ()) -> list[str]:
 
 
 def test_links_of_the_results_pages_resolve():
-    pages = [RESULTS_PAGE, HISTORY_PAGE, SUMMARIES / "README.md"]
+    pages = [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, SUMMARIES / "README.md"]
     assert [e for page in pages for e in link_errors(page)] == []
 
 
 def test_links_into_the_results_pages_resolve():
     pages = [README, *(ROOT / "docs").glob("*.md")]
-    into = [RESULTS_PAGE, HISTORY_PAGE]
+    into = [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE]
     assert [e for page in pages for e in link_errors(page, into)] == []
 
 
@@ -426,7 +427,9 @@ def test_rebuild_commands_name_the_committed_summaries():
     assert [name for name in named if not (SUMMARIES / name).is_file()] == []
 
 
-@pytest.mark.parametrize("page", [RESULTS_PAGE, HISTORY_PAGE, SUMMARIES / "README.md"], ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "page", [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, SUMMARIES / "README.md"], ids=lambda p: p.name
+)
 def test_no_path_of_one_machine(page):
     text = page.read_text()
     assert [p for p in MACHINE_PATHS if p in text] == []
