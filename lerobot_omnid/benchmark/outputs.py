@@ -229,6 +229,38 @@ def fewshot_control_lines(
     return lines
 
 
+def fewshot_probe_lines(runs: Sequence[Run], labels: Mapping[str, str]) -> list[str]:
+    """Each fine-tuned task-0 model's probe error on fresh camera-A episodes, per training seed (none
+    before a probe run is done)."""
+    # Imported here: the probe's module imports the plan, which this module's importers load first.
+    from lerobot_omnid.diagnostics.position_extrapolation import PROTOCOL, VALIDATION
+
+    errors: dict[str, dict[int | None, float]] = {}
+    mean = None
+    for run in (r for r in runs if r.kind == "probe" and is_done(r)):
+        for model, found in results.read_run_summary(run.output, PROTOCOL).results["models"].items():
+            errors.setdefault(model, {})[run.train_seed] = found["sets"][VALIDATION]["probe_cm"]
+            mean = found["sets"][VALIDATION]["mean_cm"]
+    if not errors:
+        return []
+    seeds = sorted({s for by_seed in errors.values() for s in by_seed})
+    lines = [
+        "",
+        f"## Few-shot on camera A, {TASK0}: where each fine-tuned model places the apple",
+        "",
+        "A linear probe of the frozen image condition (`python -m lerobot_omnid.diagnostics."
+        "position_extrapolation`), fitted on the camera-A episodes the models were tuned on; its error (cm) "
+        f"on fresh camera-A expert episodes; predicting the training mean: {mean:.2f} cm.",
+        "",
+        "| Model | " + " | ".join(f"training seed {s}" for s in seeds) + " |",
+        "| --- |" + " --- |" * len(seeds),
+    ]
+    for model, by_seed in errors.items():
+        cells = [f"{by_seed[s]:.2f}" if s in by_seed else MISSING for s in seeds]
+        lines.append(f"| {labels.get(model, model)} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def every_task_lines(
     p: BenchmarkProfile, records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str]
 ) -> list[str]:
@@ -399,6 +431,7 @@ def write_outputs(
                 records, methods, TASK0, SETTINGS, control_of, labels, CONTROL_LABELS
             )
         lines += fewshot_control_lines(records, methods, labels)
+        lines += fewshot_probe_lines(runs, labels)
         if any((m, TASK0, b) in cells for m in methods for b in BANDS):
             curve = charts.position_curve_chart(
                 cells, methods, TASK0, BANDS_CM, labels, out / "position_curve.png"

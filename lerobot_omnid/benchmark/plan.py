@@ -117,6 +117,7 @@ class BenchmarkProfile:
     controls: tuple[str, ...] = CONTROLS  # the controls planned, of each method's (``method_controls``)
     variants: tuple[Variant, ...] = ()  # methods with other options on task 0, each its own table row
     fewshot_recipes: tuple[FewshotRecipe, ...] = (PAPER_RECIPE,)  # with ``fewshot``: how each model is tuned
+    fewshot_probe: bool = False  # with ``fewshot``: a position probe of every fine-tuned task-0 model
 
     def __post_init__(self) -> None:
         """Variants: distinct names that are no method's or other model's, of a method the profile trains.
@@ -516,6 +517,7 @@ def plan_models(
             )
             evaluate(trained, name, TASK0, ("id",), CAMERA_A if name == "omnid_cam_a" else TRAIN_CAMERAS)
     task0_folder = train_folder(p, p.for_task(TASK0).steps)
+    tuned_task0: list[Run] = []
     for method in p.methods if fewshot_tasks else ():
         if method != "omnid":  # a copy whose image input is camera A
             src = root / task0_folder / method / TASK0 / CHECKPOINT_SUBDIR
@@ -538,7 +540,26 @@ def plan_models(
                 dataset = f"{task}_a_fewshot" + (REPLAY if recipe.replay else "")
                 steps = recipe.steps or p.finetune_steps
                 tuned = train("finetune", model, task, dataset, flags, steps, needs=(start_run,))
+                tuned_task0 += [tuned] if task == TASK0 else []
                 evaluate(tuned, model, task, (FEWSHOT,), CAMERA_A)
                 # One camera: blind only (no other camera's calibration to permute).
                 controls(tuned, method, task, (FEWSHOT,), CAMERA_A, ("blind",), model=FEWSHOT, key=model)
+    if p.fewshot_probe and tuned_task0:
+        runs.append(fewshot_probe(p, out, root, prefix, tuned_task0, train_seed))
     return runs
+
+
+def fewshot_probe(
+    p: BenchmarkProfile, out: Path, root: Path, prefix: str, tuned: Sequence[Run], train_seed: int
+) -> Run:
+    """Where each fine-tuned task-0 model's image condition places the apple: the linear probe of
+    ``lerobot_omnid.diagnostics.position_extrapolation``, fitted on the camera-A episodes they were tuned
+    on, its error measured on fresh camera-A expert episodes."""
+    output = root / "probe" / FEWSHOT
+    data = f"{TASK0}_a_fewshot"
+    cmd = [sys.executable, "-m", "lerobot_omnid.diagnostics.position_extrapolation", "--out", str(output)]
+    cmd += ["--train-root", str(out / "data" / data), "--device", p.device]
+    for run in tuned:
+        cmd += ["--checkpoint", f"{run.output.parent.name}={run.output / CHECKPOINT_SUBDIR}"]
+    needs = (f"record/{data}", *(run.name for run in tuned))
+    return Run(f"{prefix}probe/{FEWSHOT}", "probe", tuple(cmd), output, needs, train_seed=train_seed)

@@ -43,6 +43,7 @@ PRODUCTS: dict[str, tuple[str, ...]] = {
     "prepare": ("config.json",),
     "eval": ("eval_info.json",),
     "offline": ("offline_eval.json",),
+    "probe": ("summary.json",),
     "calibration": ("",),  # the output is the file itself
 }
 """What each kind of run leaves in its output (paths relative to it) when it finished."""

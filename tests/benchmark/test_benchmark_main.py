@@ -21,8 +21,11 @@ from lerobot_omnid.benchmark.methods import ABLATIONS, PAPER_RECIPE
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, TASK1, TRAIN_SEED, build_plan
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import CHECKPOINT
+from lerobot_omnid.measure.results import RunSummary, write_run_summary
 
 CONTROL_MODULE = "lerobot_omnid.benchmark.control_calibration"
+PROBE = "position_extrapolation"
+PROBE_MODULE = f"lerobot_omnid.diagnostics.{PROBE}"
 
 
 def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...] = ()):
@@ -55,6 +58,13 @@ def _fake_tools(calls: list[str], rates: dict[str, float], fail: tuple[str, ...]
             out = Path(cmd[cmd.index("--out") + 1])
             out.parent.mkdir(parents=True, exist_ok=True)
             out.write_text("{}")
+        elif PROBE_MODULE in cmd:  # each model's probe error: 10 cm less a tenth of its success rate
+            out = Path(cmd[cmd.index("--out") + 1])
+            out.mkdir(parents=True, exist_ok=True)
+            models = [a.split("=", 1)[0] for a in cmd[cmd.index("--checkpoint") + 1 :: 2]]
+            error = {m: {"probe_cm": 10 - rates.get(m, 0.0) / 10, "mean_cm": 4.47} for m in models}
+            found = {m: {"sets": {"validation (id)": e}} for m, e in error.items()}
+            write_run_summary(out / "summary.json", RunSummary(PROBE, {}, results={"models": found}))
         elif "lerobot_omnid.benchmark.checkpoint_cameras" in cmd:
             dst = Path(cmd[cmd.index("--dst") + 1])
             dst.mkdir(parents=True)
@@ -97,7 +107,7 @@ def test_fewshot_report_has_each_fine_tuned_models_blind_control(monkeypatch, tm
 def test_report_has_a_row_per_recipe_beside_its_blind_control(monkeypatch, tmp_path):
     """End to end with the tools stood in: every recipe's model in the few-shot blind-control table."""
     recipes = (PAPER_RECIPE, new_camera.HYPOTHESES["long_frozen_head"])
-    tuned = dataclasses.replace(PROFILES["mini-fewshot"], fewshot_recipes=recipes)
+    tuned = dataclasses.replace(PROFILES["mini-fewshot"], fewshot_recipes=recipes, fewshot_probe=True)
     monkeypatch.setitem(PROFILES, "mini-fewshot", tuned)
     monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
     rates = {"omnid": 60.0, "omnid_long_frozen_head": 80.0, "omnid_long_frozen_head/blind": 10.0}
@@ -112,6 +122,8 @@ def test_report_has_a_row_per_recipe_beside_its_blind_control(monkeypatch, tmp_p
     dp = ["| DP 1000 steps, head frozen", "blind", "fewshot_a", "0/10 (0.0-27.8 %)", "0/10 (0.0-27.8 %)"]
     assert omnid in rows and dp in rows
     assert '`--policy.frozen_modules=["head"]`' in report  # its options, with their reasons
+    probe = report.split(f"## Few-shot on camera A, {TASK0}: where each fine-tuned model places the apple")[1]
+    assert "| OmniD 1000 steps, head frozen | 2.00 |" in probe and "| DP | 10.00 |" in probe
 
 
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):

@@ -100,3 +100,18 @@ def test_a_selected_hypothesis_is_fine_tuned_as_validation_did(hypothesis, tmp_p
 def test_profile_refuses_recipes_it_cannot_plan(recipes, variants):
     with pytest.raises(ValueError, match="fewshot_recipes: expected distinct names"):
         profile(recipes, variants)
+
+
+def test_fewshot_probe_reads_every_fine_tuned_task0_model(tmp_path):
+    """One probe run per training seed: fitted on the camera-A episodes of task 0, every model fine-tuned
+    on them named by its table row; off unless the profile asks for it."""
+    assert not [r for r in build_plan(profile(), tmp_path, (TASK0,)) if r.kind == "probe"]
+    p = dataclasses.replace(profile(), fewshot_probe=True, train_seeds=(1000, 1001))
+    probes = [r for r in build_plan(p, tmp_path, (TASK0,)) if r.kind == "probe"]
+    assert [r.name for r in probes] == [f"probe/{FEWSHOT}", f"train_seed1001/probe/{FEWSHOT}"]
+    cmd = list(probes[0].cmd)
+    assert cmd[cmd.index("--train-root") + 1] == str(tmp_path / "data" / f"{TASK0}_a_fewshot")
+    named = [cmd[i + 1].split("=")[0] for i, a in enumerate(cmd) if a == "--checkpoint"]
+    expected = ["omnid", "omnid_long_frozen_head", "omnid_single_camera_long", "omnid_long_replay"]
+    assert named == [*expected, "diffusion", "diffusion_long_frozen_head"]
+    assert set(probes[0].needs) == {f"record/{TASK0}_a_fewshot", *(f"finetune/{m}/{TASK0}" for m in named)}
