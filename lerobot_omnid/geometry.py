@@ -296,6 +296,35 @@ def perturb_extrinsics(cam_T_world: Tensor, rotation: Tensor, translation_m: Ten
     return delta @ cam_T_world
 
 
+def rotation_warp_grid(
+    pix_T_cam: Tensor, rotation: Tensor, image_hw: tuple[int, int], calibrated_hw: tuple[int, int]
+) -> Tensor:
+    """``grid_sample`` coordinates (``align_corners=False``) that make, from a camera's image, the image it
+    would take turned by ``rotation`` about its optical centre: the pure-rotation homography ``K R^T K^-1``
+    needs no depth, so the turned view is exact where the unturned one saw (outside: off the grid, > 1).
+    The turned camera's extrinsics are ``perturb_extrinsics(cam_T_world, rotation, 0)``.
+
+    Args:
+        pix_T_cam: (..., 3, 3) K for images of ``calibrated_hw``.
+        rotation: (..., 3, 3) the turn: a point's coordinates in the turned camera's frame are ``rotation``
+            times those in the unturned one's.
+        image_hw: (H, W) of the images to warp, a uniform resize of ``calibrated_hw``.
+    Returns:
+        (..., H, W, 2) for each pixel of the turned image, where to read the unturned one.
+    """
+    h, w = image_hw
+    like = {"dtype": pix_T_cam.dtype, "device": pix_T_cam.device}
+    v, u = torch.meshgrid(torch.arange(h, **like), torch.arange(w, **like), indexing="ij")
+    grid = pixels_to_grid(torch.stack([u, v], dim=-1), image_hw)  # H, W, 2: the output pixels
+    uv = grid_to_pixels(grid, calibrated_hw)  # in the calibration's pixel units
+    pixel = torch.cat([uv, torch.ones_like(uv[..., :1])], dim=-1)  # H, W, 3
+    source_from_target = pix_T_cam @ rotation.transpose(-1, -2) @ torch.linalg.inv(pix_T_cam)  # ..., 3, 3
+    ray = pixel @ source_from_target[..., None, :, :].transpose(-1, -2)  # ..., H, W, 3
+    source, in_front = project_to_pixels(torch.eye(3, **like), ray.flatten(-3, -2))
+    source = pixels_to_grid(source, calibrated_hw).unflatten(-2, (h, w))
+    return torch.where(in_front.unflatten(-1, (h, w))[..., None], source, torch.full_like(source, 2.0))
+
+
 def translate_world(cam_T_world: Tensor, shift_m: Tensor) -> Tensor:
     """The same cameras in a world where everything, cameras included, moved by ``shift_m``: a point
     ``p + shift_m`` is seen where ``p`` was, i.e. ``cam_T_world @ T(-shift_m)``; the images stay true.

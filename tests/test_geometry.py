@@ -7,16 +7,19 @@ import torch.nn.functional as F
 from lerobot_omnid.geometry import (
     FeatureVolume,
     apply_transform,
+    axis_angle_to_matrix,
     camera_centers_world,
     clamp_to_feature_cells,
     crop_intrinsics,
     crop_theta,
     look_at,
+    perturb_extrinsics,
     pixels_to_feature_grid,
     pixels_to_grid,
     point_seen_on_plane,
     project_to_grid,
     project_to_pixels,
+    rotation_warp_grid,
     translate_world,
 )
 
@@ -191,3 +194,45 @@ def test_point_seen_on_plane_undoes_a_believed_translation():
     K64 = K.to(torch.float64)
     assert torch.allclose(point_seen_on_plane(K64, true, true, point), point, atol=1e-9)
     assert torch.allclose(point_seen_on_plane(K64, believed, true, point), point - shift, atol=1e-9)
+
+
+def blob(uv: torch.Tensor, hw: tuple[int, int], sigma: float = 1.5) -> torch.Tensor:
+    """(1, 1, H, W) image of a Gaussian spot centred on pixel ``uv`` (pixel centres at integers)."""
+    v, u = torch.meshgrid(torch.arange(hw[0]), torch.arange(hw[1]), indexing="ij")
+    return torch.exp(-((u - uv[0]) ** 2 + (v - uv[1]) ** 2) / (2 * sigma**2))[None, None].float()
+
+
+def spot(image: torch.Tensor) -> torch.Tensor:
+    """Intensity-weighted centre (u, v) of a (1, 1, H, W) image."""
+    v, u = torch.meshgrid(torch.arange(image.shape[-2]), torch.arange(image.shape[-1]), indexing="ij")
+    w = image[0, 0] / image.sum()
+    return torch.stack([(w * u).sum(), (w * v).sum()])
+
+
+@pytest.mark.parametrize(("image_hw", "calibrated_hw"), [((64, 64), (64, 64)), ((48, 64), (96, 128))])
+def test_rotation_warp_shows_a_point_where_the_turned_calibration_projects_it(image_hw, calibrated_hw):
+    """Warping a camera's image by ``rotation_warp_grid`` and turning its extrinsics by the same rotation
+    keep them consistent: a world point's spot moves to where the turned calibration projects it (a sign
+    or transpose error moves it the other way); at any image size the calibration's is a resize of."""
+    h, w = calibrated_hw
+    K_cal = torch.tensor([[0.8 * w, 0.0, (w - 1) / 2], [0.0, 0.8 * w, (h - 1) / 2], [0.0, 0.0, 1.0]])
+    cam_T_world = look_at(torch.tensor([0.0, -1.0, 1.0]), torch.tensor([0.0, 0.0, 0.0]))
+    point = torch.tensor([[0.05, 0.03, 0.02]])
+    rotation = axis_angle_to_matrix(F.normalize(torch.tensor([0.3, -0.8, 0.5]), dim=0), torch.tensor(0.1))
+    turned = perturb_extrinsics(cam_T_world, rotation, torch.zeros(3))
+    scale = torch.tensor([image_hw[1] / w, image_hw[0] / h])
+
+    def seen(T: torch.Tensor) -> torch.Tensor:  # the point's pixel in the image of size image_hw
+        uv, _ = project_to_pixels(K_cal, apply_transform(T, point))
+        return (uv[0] + 0.5) * scale - 0.5
+
+    before, after = seen(cam_T_world), seen(turned)
+    assert (after - before).norm() > 3  # the turn moves the point by several pixels
+    image = blob(before, image_hw)
+    grid = rotation_warp_grid(K_cal, rotation, image_hw, calibrated_hw)
+    assert grid.shape == (*image_hw, 2)
+    warped = F.grid_sample(image, grid[None], mode="bilinear", padding_mode="zeros", align_corners=False)
+    assert torch.allclose(spot(warped), after, atol=0.15)
+    still = rotation_warp_grid(K_cal, torch.eye(3), image_hw, calibrated_hw)
+    identity = F.grid_sample(image, still[None], mode="bilinear", padding_mode="zeros", align_corners=False)
+    assert torch.allclose(identity, image, atol=1e-5)

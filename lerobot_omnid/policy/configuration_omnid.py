@@ -32,6 +32,7 @@ NOISE_SCHEDULERS = ("DDPM", "DDIM")
 PREDICTION_TYPES = ("epsilon", "sample")
 OFG_ONLY_OPTIONS = {
     "random_crop_min_scale": 1.0,
+    "camera_rotation_deg": 0.0,
     "calibration_noise_rotation_deg": 0.0,
     "calibration_noise_translation_mm": 0.0,
     "calibration_noise_focal_pct": 0.0,
@@ -123,6 +124,12 @@ class OmniDConfig(PreTrainedConfig):
             sample's K is moved with it. 1.0 (default) disables it. Use this instead of LeRobot's
             dataset transforms ``RandomAffine`` / crops, which move the images but not K (LeRobot's
             photometric transforms, e.g. ColorJitter, are fine).
+        camera_rotation_deg: Geometric augmentation that moves the camera and keeps the calibration true (0:
+            off): in training, per sample and camera (the same for all observation steps) the camera is
+            turned about its optical centre by a random angle up to this many degrees about a random axis;
+            its images are warped to what it would then see (a pure rotation needs no depth: exact inside
+            the old view, black outside it) and its extrinsics turned with it, so the OFG sees views and
+            poses the rig never had. A moved camera also translates, which no image warp can make.
         calibration_noise_rotation_deg, calibration_noise_translation_mm: Training-time extrinsics noise
             (0: off): per sample and camera (the same for all observation steps) the camera is believed
             turned about its optical centre by a rotation vector with this standard deviation per axis
@@ -153,8 +160,8 @@ class OmniDConfig(PreTrainedConfig):
             costs 1 / n_obs_steps as much; what the head loses is the image history.
         use_ofg: False gives the paper's "w/o OFG" ablation: per-camera spatial-softmax features
             concatenated in camera order instead of the 3D feature (then the cameras are fixed). The
-            augmentations of the OFG's path (``random_crop_min_scale``, ``calibration_noise_*``,
-            ``camera_dropout``, ``single_camera_rate``) would do nothing there and must then be off.
+            augmentations of the OFG's path (``OFG_ONLY_OPTIONS``: crop, camera rotation, calibration noise,
+            camera dropout, single camera, position shift) would do nothing there and must then be off.
         volume_bounds: ((x_min, x_max), (y_min, y_max), (z_min, z_max)) of the feature volume in the robot
             base frame, metres.
         volume_shape: Cells along (x, y, z).
@@ -239,6 +246,7 @@ class OmniDConfig(PreTrainedConfig):
     camera_dropout: float = 0.0
     single_camera_rate: float = 0.0
     position_shift_m: float = 0.0
+    camera_rotation_deg: float = 0.0
     state_position_dims: tuple[int, int] = (0, 1)
     action_position_dims: tuple[int, int] = (0, 1)
     fuse_last_step_only: bool = False
@@ -364,6 +372,10 @@ class OmniDConfig(PreTrainedConfig):
         if not 0 <= self.single_camera_rate <= 1:
             raise ValueError(
                 f"`single_camera_rate`: expected a share in [0, 1], got {self.single_camera_rate}"
+            )
+        if not 0 <= self.camera_rotation_deg < 90:
+            raise ValueError(
+                f"`camera_rotation_deg`: expected an angle in [0, 90) degrees, got {self.camera_rotation_deg}"
             )
         if not self.position_shift_m >= 0:
             raise ValueError(

@@ -43,7 +43,9 @@ from lerobot_omnid.geometry import (
     crop_theta,
     perturb_extrinsics,
     perturb_intrinsics,
+    random_unit_vectors,
     resize_intrinsics,
+    rotation_warp_grid,
     translate_world,
 )
 from lerobot_omnid.policy.backbone import ResNetFeatures
@@ -450,11 +452,14 @@ class OmniDPolicy(PreTrainedPolicy):
     def _augment(
         self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor, visible: Tensor | None = None
     ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
-        """The training-time options that keep images and calibration consistent: crop, calibration noise,
-        camera dropout (among the ``visible`` (B, S) cameras of each sample, when given; the returned mask is
-        ``visible`` itself without dropout). Geometry in full precision (autocast off): see the OFG."""
+        """The training-time options that keep images and calibration consistent: camera rotation, crop,
+        calibration noise, camera dropout (among the ``visible`` (B, S) cameras of each sample, when given;
+        the returned mask is ``visible`` itself without dropout). Geometry in full precision (autocast off):
+        see the OFG."""
         camera_mask = visible
         with torch.autocast(images.device.type, enabled=False):
+            if self.config.camera_rotation_deg > 0:
+                images, cam_T_world = self._rotate_cameras(images, pix_T_cam.float(), cam_T_world.float())
             if self.config.random_crop_min_scale < 1:
                 images, pix_T_cam = self._random_crop(images, pix_T_cam)
             pix_T_cam, cam_T_world = self._calibration_noise(pix_T_cam.float(), cam_T_world.float())
@@ -483,6 +488,41 @@ class OmniDPolicy(PreTrainedPolicy):
             shift = torch.randn(B, S, 2, **like) * c.calibration_noise_principal_px
             pix_T_cam = perturb_intrinsics(pix_T_cam, scale[per_step], shift[per_step])
         return pix_T_cam, cam_T_world
+
+    def _rotate_cameras(
+        self, images: Tensor, pix_T_cam: Tensor, cam_T_world: Tensor, rotation: Tensor | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """``camera_rotation_deg``: each sample's cameras turned about their optical centres, their images
+        warped to the turned views and their extrinsics turned with them.
+
+        Args:
+            images: (B, T, S, 3, H, W).
+            pix_T_cam: (B, S, 3, 3), or (B, T, S, 3, 3) calibrated per frame, for the backbone's input size.
+            cam_T_world: (B, S, 4, 4), or (B, T, S, 4, 4).
+            rotation: (B, S, 3, 3), the same for every observation step; None draws each uniformly up to
+                ``camera_rotation_deg`` about a random axis.
+        Returns:
+            The warped images (B, T, S, 3, H, W) and the turned cam_T_world.
+        """
+        B, T, S, _, H, W = images.shape
+        if rotation is None:
+            like = {"dtype": cam_T_world.dtype, "device": cam_T_world.device}
+            angle = torch.rand(B, S, **like) * math.radians(self.config.camera_rotation_deg)
+            rotation = axis_angle_to_matrix(random_unit_vectors((B, S), **like), angle)
+        if pix_T_cam.ndim == 5:
+            rotation = rotation[:, None].expand(B, T, S, 3, 3)
+        input_hw = tuple(self.config.resize_shape or (H, W))
+        grid = rotation_warp_grid(pix_T_cam, rotation, (H, W), input_hw)  # B, [T,] S, H, W, 2
+        grid = grid[:, None].expand(B, T, S, H, W, 2) if grid.ndim == 5 else grid
+        x = F.grid_sample(
+            images.flatten(0, 2),
+            grid.reshape(B * T * S, H, W, 2).to(images.dtype),
+            mode="bilinear",
+            padding_mode="zeros",
+            align_corners=False,
+        )
+        still = torch.zeros(*rotation.shape[:-2], 3, dtype=cam_T_world.dtype, device=cam_T_world.device)
+        return x.view_as(images), perturb_extrinsics(cam_T_world, rotation, still)
 
     def _random_crop(self, images: Tensor, pix_T_cam: Tensor) -> tuple[Tensor, Tensor]:
         """Geometric augmentation that keeps the calibration: per sample and camera (the same for every

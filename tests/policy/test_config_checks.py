@@ -21,6 +21,7 @@ CAMS_B = {"cam_b": "cam_b"}
 CAMS_BC = {"cam_b": "cam_b", "cam_c": "cam_c"}
 OFG_AUGMENTATIONS = {  # each set to a value that is on
     "random_crop_min_scale": 0.5,
+    "camera_rotation_deg": 5.0,
     "calibration_noise_rotation_deg": 2.0,
     "calibration_noise_translation_mm": 20.0,
     "calibration_noise_focal_pct": 2.0,
