@@ -38,6 +38,7 @@ from lerobot_omnid.benchmark.methods import METHODS
 from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs, write_summary
 from lerobot_omnid.benchmark.plan import (
     PROFILES,
+    RIG_SETTINGS,
     SETTINGS,
     BenchmarkProfile,
     available_tasks,
@@ -75,9 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--tasks", type=csv_of(str, available_tasks()), help="subset of the benchmark's tasks"
     )
-    parser.add_argument(
-        "--settings", type=csv_of(str, SETTINGS), help=f"task-0 settings, of {','.join(SETTINGS)}"
-    )
+    every = (*SETTINGS, *RIG_SETTINGS)
+    parser.add_argument("--settings", type=csv_of(str, every), help=f"task-0 settings, of {','.join(every)}")
     parser.add_argument(
         "--eval-seeds", type=csv_of(int, None), help="comma-separated eval seeds, e.g. 1,2,3,4"
     )

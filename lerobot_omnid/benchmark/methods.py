@@ -317,6 +317,28 @@ def recipe_flags(method: str, recipe: FewshotRecipe) -> list[Flag]:
     return with_options(base, changes)
 
 
+RIG_VARIANTS = (
+    *(
+        Variant(
+            f"omnid_rot{deg}",
+            "omnid",
+            f"OmniD cameras turned up to {deg} deg",
+            (
+                (
+                    f"--policy.camera_rotation_deg={deg}",
+                    f"each training sample's cameras turned about their centres by up to {deg} degrees, "
+                    "images warped and extrinsics turned with them: poses the training rig never had",
+                ),
+            ),
+        )
+        for deg in (5, 10)
+    ),
+    SINGLE_CAMERA,
+)
+"""The moved-rig validation's candidates beside OmniD as trained
+(docs/benchmark.md#moved-rigs-its-protocol)."""
+
+
 def variant_flags(variant: Variant, p: BenchmarkProfile) -> list[Flag]:
     """Options of ``variant``: its method's, with its own options replacing or added to them."""
     return with_options(method_flags(variant.method, p), variant.flags)

@@ -38,6 +38,7 @@ from lerobot_omnid.benchmark.plan import (
     MULTITASK,
     MULTITASK_METHODS,
     OFFLINE_OUTPUT,
+    RIG_SETTINGS,
     SETTINGS,
     TASK0,
     TASK1,
@@ -352,6 +353,31 @@ def curve_lines(
     return [*lines, "", f"![position-shift curve]({chart.name})"]
 
 
+def rig_lines(
+    cells: Mapping[results.Key, results.CellResult], methods: Sequence[str], labels: Mapping[str, str]
+) -> list[str]:
+    """Task 0 on the unseen rigs beside ID, each model's rigs pooled (none before a rig is evaluated)."""
+    rigs = [s for s in RIG_SETTINGS if any((m, TASK0, s) in cells for m in methods)]
+    if not rigs:
+        return []
+    rows = []
+    for m in (m for m in methods if any((m, TASK0, s) in cells for s in rigs)):
+        row = [cells.get((m, TASK0, s)) for s in ("id", *rigs)]
+        done = [c for c in row[1:] if c is not None]
+        pooled = results.CellResult(sum(c.successes for c in done), sum(c.episodes for c in done), ())
+        row_text = [report.format_rate(c) if c else MISSING for c in row]
+        rows.append([labels.get(m, m), *row_text, report.format_rate(pooled) if done else MISSING])
+    return [
+        "",
+        f"## Task 0 ({TASK0}): moved rigs, each with its true calibration",
+        "",
+        "The training rig's layouts seen by cameras moved elsewhere (`gym_omnid.RIGS`); OmniD reads each "
+        "rig's calibration from every frame, the others see its images. Success (%, Wilson 95 %).",
+        "",
+        *report.markdown_table(["Model", "ID", *rigs, "moved rigs pooled"], rows),
+    ]
+
+
 def write_summary(
     p: BenchmarkProfile,
     tasks: tuple[str, ...],
@@ -432,6 +458,7 @@ def write_outputs(
             )
         lines += fewshot_control_lines(records, methods, labels)
         lines += fewshot_probe_lines(runs, labels)
+        lines += rig_lines(cells, methods, labels)
         if any((m, TASK0, b) in cells for m in methods for b in BANDS):
             curve = charts.position_curve_chart(
                 cells, methods, TASK0, BANDS_CM, labels, out / "position_curve.png"

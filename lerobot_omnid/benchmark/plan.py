@@ -26,6 +26,7 @@ from lerobot_omnid.benchmark.commands import (
     BIN,
     control_calibration_command,
     eval_command,
+    json_list,
     merge_command,
     record_command,
     train_command,
@@ -37,6 +38,7 @@ from lerobot_omnid.benchmark.methods import (
     METHODS,
     PAPER_RECIPE,
     POSITION_VARIANTS,
+    RIG_VARIANTS,
     VQBET_CAMERA,
     FewshotRecipe,
     Variant,
@@ -48,6 +50,7 @@ from lerobot_omnid.benchmark.methods import (
     recipe_flags,
     variant_flags,
 )
+from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import CHECKPOINT as CHECKPOINT_SUBDIR
 from lerobot_omnid.measure.engine import Run, plan
 
@@ -71,6 +74,9 @@ TASK0, TASK1 = "select_apple", "select_chemistry_tube"  # the paper's task 0 and
 BACKGROUND_OODS = ("ood1", "ood2", "ood3", "ood4")
 BANDS = tuple(POSITION_BANDS)  # position_band_1 .. _4: the position-shift curve's settings
 SETTINGS = ("id", "position_ood", *BACKGROUND_OODS, *BANDS)
+UNSEEN_RIGS = ("higher", "bumped")  # gym_omnid.RIGS that no training set of the benchmark has
+RIG_SETTINGS = tuple(f"rig_{rig}" for rig in UNSEEN_RIGS)
+"""Settings of the ID layouts seen by a moved rig, whose true calibration OmniD reads from every frame."""
 FEWSHOT = "fewshot_a"
 """Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
 REPLAY = "_replay"
@@ -129,6 +135,11 @@ class BenchmarkProfile:
                     f"variants: expected distinct new names of methods among {list(self.methods)}, got "
                     f"{v.name!r} of {v.method!r}"
                 )
+        if set(self.control_settings) & set(RIG_SETTINGS):
+            raise ValueError(
+                f"control_settings: expected none of {list(RIG_SETTINGS)} (a control's calibration is "
+                f"static, a moved rig's per frame), got {list(self.control_settings)}"
+            )
         recipes = [r.name for r in self.fewshot_recipes]
         starts = ["", *(v.name for v in self.variants if v.method == "omnid")]
         for r in self.fewshot_recipes:
@@ -220,6 +231,14 @@ PROFILES = {
         settings=("id", *BANDS), control_settings=(), controls=(), fuse_last_step_only=True,
         variants=POSITION_VARIANTS,
     ),
+    # Validation of what keeps OmniD's success on a moved rig (docs/benchmark.md#moved-rigs-its-protocol):
+    # OmniD and DP as for position-validation (run it with that --out to reuse both) and RIG_VARIANTS, in
+    # ID and on the two unseen rigs, each with its true calibration, on validation env seeds.
+    "rigs-validation": dataclasses.replace(
+        MINI, name="rigs-validation", heldout_episodes=0, eval_episodes=10, eval_seeds=(81,),
+        settings=("id", *RIG_SETTINGS), control_settings=(), controls=(), fuse_last_step_only=True,
+        variants=RIG_VARIANTS,
+    ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
         steps=100_000, finetune_steps=5000, batch_size=16, eval_episodes=50, eval_batch_size=10,
@@ -244,16 +263,28 @@ def heldout_dataset(task: str, setting: str) -> str:
 
 def setting_env(setting: str) -> tuple[str, str]:
     """(layout, background) of an evaluation setting."""
-    if setting in ("id", FEWSHOT):
+    if setting in ("id", FEWSHOT, *RIG_SETTINGS):
         return "id", "id"
     if setting == "position_ood" or setting in BANDS:
         return setting, "id"
     if setting in BACKGROUND_OODS:
         return "id", setting
     raise ValueError(
-        f"setting: expected id, {FEWSHOT}, position_ood or one of {[*BACKGROUND_OODS, *BANDS]}, "
-        f"got {setting!r}"
+        f"setting: expected id, {FEWSHOT}, position_ood or one of "
+        f"{[*BACKGROUND_OODS, *BANDS, *RIG_SETTINGS]}, got {setting!r}"
     )
+
+
+def rig_options(setting: str, method: str, cameras: Sequence[str]) -> list[str]:
+    """``lerobot-eval`` options of a moved-rig setting (none for the others): the env's rig and, for
+    OmniD, its true calibration read from every frame (a checkpoint's static one is the training rig's)."""
+    if setting not in RIG_SETTINGS:
+        return []
+    options = [f"--env.rig={setting.removeprefix('rig_')}"]
+    if method == "omnid":
+        keys = json_list([image_key(c) for c in cameras])
+        options += ["--env.per_frame_calibration=true", f"--policy.frame_calibration={keys}"]
+    return options
 
 
 def control_setting(setting: str, control: str, control_settings: Sequence[str]) -> str | None:
@@ -395,7 +426,9 @@ def plan_models(
         control: str = "",
         control_options: Sequence[str] = (),
         needs: Sequence[str] = (),
+        method: str = "",
     ) -> None:
+        """Evaluate ``trained`` as ``model`` in ``settings``; a moved rig's needs ``method``."""
         folder = f"eval_{control}" if control else "eval"
         for setting in settings:
             layout, background = setting_env(setting)
@@ -412,7 +445,11 @@ def plan_models(
                     p.device,
                     background,
                     seed=k * EVAL_SEED_STRIDE,
-                    extra=(f"--env.episode_length={p.episode_length}", *control_options),
+                    extra=(
+                        f"--env.episode_length={p.episode_length}",
+                        *control_options,
+                        *rig_options(setting, method, cameras),
+                    ),
                     batch_size=min(p.eval_batch_size, p.eval_episodes),
                 )
                 name = f"{prefix}{folder}/{model}/{task}/{setting}/seed{k}"
@@ -478,7 +515,7 @@ def plan_models(
             trained = train(folder, method, task, f"{task}_bcde", [*common(method), *flags], sized.steps)
             cameras = VQBET_CAMERA if method == "vqbet" else TRAIN_CAMERAS
             settings = p.task_settings(task)
-            evaluate(trained, method, task, settings, cameras)
+            evaluate(trained, method, task, settings, cameras, method=method)
             controlled = [s for s in p.control_settings if s in settings]
             controls(trained, method, task, controlled, cameras, p.task_controls(method, task))
             if task == TASK0:
@@ -503,7 +540,7 @@ def plan_models(
         )
         cameras = VQBET_CAMERA if variant.method == "vqbet" else TRAIN_CAMERAS
         settings = p.task_settings(TASK0)
-        evaluate(trained, variant.name, TASK0, settings, cameras)
+        evaluate(trained, variant.name, TASK0, settings, cameras, method=variant.method)
         controlled = [s for s in p.control_settings if s in settings]
         kinds = p.task_controls(variant.method, TASK0)
         controls(trained, variant.method, TASK0, controlled, cameras, kinds, key=variant.name)

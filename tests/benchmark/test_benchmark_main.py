@@ -560,3 +560,24 @@ def test_position_validation_reports_its_variants_and_the_choice(monkeypatch, tm
     assert curve in report  # the curve: a row per variant, its four bands and the area
     chosen = [line.split(" | ")[0] for line in report.splitlines() if "**chosen**" in line]
     assert chosen == ["| OmniD clip 2, shift 10 cm", "| DP"]  # DP's variant only ties it
+
+
+def test_rigs_validation_reports_the_moved_rigs_and_the_choice(monkeypatch, tmp_path):
+    """The moved-rig validation with the tools stood in: three OmniD variants and DP beside OmniD as
+    trained, each in ID and on the two unseen rigs; the rig table pools the rigs, the rule picks by them."""
+    from lerobot_omnid.measure.report import format_rate
+    from lerobot_omnid.measure.results import CellResult
+
+    calls: list[str] = []
+    rates = {"omnid": 30.0, "omnid_rot5": 40.0, "omnid_rot10": 60.0, "omnid_single_camera": 50.0}
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, rates | {"diffusion": 20.0}))
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    assert bench.main(["--profile", "rigs-validation", "--out", str(tmp_path / "r")]) == 0
+    assert calls.count("lerobot-train") == 5 and calls.count("lerobot-eval") == 15
+    report = (tmp_path / "r" / "report.md").read_text()
+    six, pooled = format_rate(CellResult(6, 10, ())), format_rate(CellResult(12, 20, ()))
+    row = f"| OmniD cameras turned up to 10 deg | {six} | {six} | {six} | {pooled} |"
+    assert row in report
+    assert "| Model | ID | rig_higher | rig_bumped | moved rigs pooled |" in report
+    chosen = [line.split(" | ")[0] for line in report.splitlines() if "**chosen**" in line]
+    assert chosen == ["| OmniD cameras turned up to 10 deg"]

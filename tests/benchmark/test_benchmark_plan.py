@@ -168,7 +168,7 @@ def test_new_tasks_are_picked_up(monkeypatch, tmp_path):
     ]
 
 
-@pytest.mark.parametrize("profile", ["mini", "paper", "position-validation"])
+@pytest.mark.parametrize("profile", ["mini", "paper", "position-validation", "rigs-validation"])
 def test_lerobot_parses_every_training_command(profile, tmp_path):
     """Each from-scratch training command is a valid `lerobot-train` configuration (option names, values
     and the policy configs' own checks)."""
@@ -183,6 +183,8 @@ def test_lerobot_parses_every_training_command(profile, tmp_path):
             assert cfg.steps == p.steps and cfg.seed == TRAIN_SEED
             if "clip2" in run.name:
                 assert cfg.policy.clip_sample_range == 2.0, run.name
+            if "_rot" in run.name:
+                assert cfg.policy.camera_rotation_deg in (5, 10), run.name
 
 
 def test_training_seeds_repeat_the_models_in_their_own_folders(tmp_path):
@@ -403,3 +405,45 @@ def test_with_options_replaces_an_option_of_the_same_name_and_appends_new_ones()
         ("--policy.b=3", "z"),
         ("--policy.c=4", "w"),
     ]
+
+
+def test_rigs_validation_evaluates_each_model_on_the_moved_rigs_with_their_true_calibration(tmp_path):
+    """OmniD reads each moved rig's calibration from every frame, DP sees its images; ID stays the
+    training rig; OmniD and DP as trained are position-validation's runs (the same commands)."""
+    p = PROFILES["rigs-validation"]
+    runs = by_name(build_plan(p, tmp_path, (TASK0,)))
+    position = by_name(build_plan(PROFILES["position-validation"], tmp_path, (TASK0,)))
+    for name in ("record/select_apple_bcde", f"train/omnid/{TASK0}", f"train/diffusion/{TASK0}"):
+        assert runs[name].cmd == position[name].cmd, name
+    assert {v.name for v in p.variants} == {"omnid_rot5", "omnid_rot10", "omnid_single_camera"}
+    for model in ("omnid", "omnid_rot10", "diffusion"):
+        same = runs[f"eval/{model}/{TASK0}/id/seed81"].cmd
+        assert flag(same, "env.rig") is None and flag(same, "seed") == "81000"
+        for rig in ("higher", "bumped"):
+            cmd = runs[f"eval/{model}/{TASK0}/rig_{rig}/seed81"].cmd
+            assert flag(cmd, "env.rig") == rig and flag(cmd, "env.layout") == "id"
+            calibrated = model.startswith("omnid")
+            assert flag(cmd, "env.per_frame_calibration") == ("true" if calibrated else None)
+            keys = json.dumps([f"observation.images.{c}" for c in ("cam_b", "cam_c", "cam_d", "cam_e")])
+            assert flag(cmd, "policy.frame_calibration") == (keys.replace(" ", "") if calibrated else None)
+    rotated = runs[f"train/omnid_rot5/{TASK0}"].cmd
+    assert flag(rotated, "policy.camera_rotation_deg") == "5" and not any(r.control for r in runs.values())
+    with pytest.raises(ValueError, match="control_settings: expected none of"):
+        dataclasses.replace(p, control_settings=("rig_higher",))
+
+
+def test_validation_profiles_use_env_seeds_no_other_profile_or_protocol_uses():
+    from lerobot_omnid.benchmark import new_camera, readout_selection
+
+    def span(p):
+        return [(k * 1000, k * 1000 + p.eval_episodes - 1) for k in p.eval_seeds]
+
+    others = [(0, 999), (FEWSHOT_SEED, FEWSHOT_SEED + 999), (HELDOUT_SEED, HELDOUT_SEED + 999)]
+    others += [(s, s + 99) for s in (readout_selection.VALIDATION_SEED, new_camera.VALIDATION_SEED)]
+    others += [(task_sizing.VALIDATION_SEED, task_sizing.VALIDATION_SEED + 99)]
+    validations = [name for name in PROFILES if name.endswith("-validation")]
+    assert {"position-validation", "rigs-validation"} <= set(validations)
+    for name in validations:
+        theirs = others + [r for other, p in PROFILES.items() if other != name for r in span(p)]
+        for low, high in span(PROFILES[name]):
+            assert all(high < a or low > b for a, b in theirs), name
