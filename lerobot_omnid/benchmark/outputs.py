@@ -38,6 +38,8 @@ from lerobot_omnid.benchmark.plan import (
     MULTITASK,
     MULTITASK_METHODS,
     OFFLINE_OUTPUT,
+    PROBE_PROTOCOL,
+    PROBE_SET,
     RIG_SETTINGS,
     SETTINGS,
     TASK0,
@@ -233,15 +235,12 @@ def fewshot_control_lines(
 def fewshot_probe_lines(runs: Sequence[Run], labels: Mapping[str, str]) -> list[str]:
     """Each fine-tuned task-0 model's probe error on fresh camera-A episodes, per training seed (none
     before a probe run is done)."""
-    # Imported here: the probe's module imports the plan, which this module's importers load first.
-    from lerobot_omnid.diagnostics.position_extrapolation import PROTOCOL, VALIDATION
-
     errors: dict[str, dict[int | None, float]] = {}
     mean = None
     for run in (r for r in runs if r.kind == "probe" and is_done(r)):
-        for model, found in results.read_run_summary(run.output, PROTOCOL).results["models"].items():
-            errors.setdefault(model, {})[run.train_seed] = found["sets"][VALIDATION]["probe_cm"]
-            mean = found["sets"][VALIDATION]["mean_cm"]
+        for model, found in results.read_run_summary(run.output, PROBE_PROTOCOL).results["models"].items():
+            errors.setdefault(model, {})[run.train_seed] = found["sets"][PROBE_SET]["probe_cm"]
+            mean = found["sets"][PROBE_SET]["mean_cm"]
     if not errors:
         return []
     seeds = sorted({s for by_seed in errors.values() for s in by_seed})

@@ -78,6 +78,11 @@ UNSEEN_RIGS = ("higher", "bumped")  # gym_omnid.RIGS that no training set of the
 RIG_SETTINGS = tuple(f"rig_{rig}" for rig in UNSEEN_RIGS)
 """Settings of the ID layouts seen by a moved rig, whose true calibration OmniD reads from every frame."""
 FEWSHOT = "fewshot_a"
+# The few-shot probe run's contract: the module it runs, the protocol its summary names, and the set whose
+# error the report reads.
+PROBE_MODULE = "lerobot_omnid.diagnostics.position_extrapolation"
+PROBE_PROTOCOL = "position_extrapolation"
+PROBE_SET = "validation (id)"
 """Setting name of a model fine-tuned on camera A, evaluated with camera A in the ID setting."""
 REPLAY = "_replay"
 """Suffix of a task's replay fine-tuning set: its camera-A few-shot episodes and as many training episodes
@@ -594,7 +599,7 @@ def fewshot_probe(
     on, its error measured on fresh camera-A expert episodes."""
     output = root / "probe" / FEWSHOT
     data = f"{TASK0}_a_fewshot"
-    cmd = [sys.executable, "-m", "lerobot_omnid.diagnostics.position_extrapolation", "--out", str(output)]
+    cmd = [sys.executable, "-m", PROBE_MODULE, "--out", str(output)]
     cmd += ["--train-root", str(out / "data" / data), "--device", p.device]
     for run in tuned:
         cmd += ["--checkpoint", f"{run.output.parent.name}={run.output / CHECKPOINT_SUBDIR}"]

@@ -44,6 +44,9 @@ from torch import Tensor
 from tqdm import tqdm
 
 from lerobot_omnid.benchmark.commands import record_command, recorded_episodes
+from lerobot_omnid.benchmark.plan import PROBE_MODULE as MODULE
+from lerobot_omnid.benchmark.plan import PROBE_PROTOCOL as PROTOCOL
+from lerobot_omnid.benchmark.plan import PROBE_SET as VALIDATION
 from lerobot_omnid.benchmark.plan import TASK0
 from lerobot_omnid.diagnostics.offline_eval import GRIPPER, POSITION, load_policy
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX
@@ -52,11 +55,8 @@ from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary,
 
 FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest): the object is unmoved
 PROBE_SEED = 400_000  # first env seed of the probe's recordings
-PROTOCOL = "position_extrapolation"
-MODULE = "lerobot_omnid.diagnostics.position_extrapolation"
 RIDGE_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)  # per sample, on standardised features
 BATCH = 32
-VALIDATION = "validation (id)"  # the fresh in-distribution set that chooses the ridge weight
 
 
 def probe_frames(root: Path, frames: range = FRAMES) -> tuple[list[dict[str, Tensor]], Tensor]:

@@ -11,10 +11,10 @@ import os
 import subprocess
 
 import pytest
+from gym_omnid import ALL_CAMERAS
 from omnid_testing import TINY_POLICY_FLAGS
 
 from lerobot_omnid.benchmark import commands
-from lerobot_omnid.benchmark.new_camera import ALL_CAMERAS
 from lerobot_omnid.camera_visibility import CAMERA_VISIBLE_KEY
 from lerobot_omnid.measure.engine import CHECKPOINT
 
