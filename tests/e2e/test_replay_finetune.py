@@ -11,7 +11,7 @@ import os
 import subprocess
 
 import pytest
-from gym_omnid import ALL_CAMERAS
+from gym_omnid import CAMERAS
 from omnid_testing import TINY_POLICY_FLAGS
 
 from lerobot_omnid.benchmark import commands
@@ -37,15 +37,15 @@ def test_replayed_and_new_camera_episodes_fine_tune_one_omnid(tmp_path):
     parts = []
     for name, seed, hidden in (("a", 100_000, BCDE), ("replay", 0, ("cam_a",))):
         root = data / name
-        cmd = commands.record_command("select_apple", 1, ALL_CAMERAS, SIZE, root, seed=seed)
+        cmd = commands.record_command("select_apple", 1, CAMERAS, SIZE, root, seed=seed)
         run([*cmd, "--hidden-cameras", ",".join(hidden)])
         parts.append(root)
     run(commands.merge_command(parts, data / "merged"))
     flags = [f"--policy.path={tmp_path / 'pretrained' / CHECKPOINT}", "--policy.device=cpu"]
-    flags += ["--policy.push_to_hub=false", f"--policy.cameras={commands.json_list(ALL_CAMERAS)}"]
+    flags += ["--policy.push_to_hub=false", f"--policy.cameras={commands.json_list(CAMERAS)}"]
     run(commands.train_command(data / "merged", tmp_path / "tuned", flags, 2, 2, num_workers=0))
     config = json.loads((tmp_path / "tuned" / CHECKPOINT / "config.json").read_text())
-    assert config["camera_visible_names"] == list(ALL_CAMERAS)
+    assert config["camera_visible_names"] == list(CAMERAS)
     assert CAMERA_VISIBLE_KEY not in config["input_features"]
     assert len([k for k in config["input_features"] if ".images." in k]) == 5
     extra = ["--env.episode_length=5", "--env.per_frame_calibration=true", '--policy.cameras=["cam_a"]']
