@@ -18,7 +18,7 @@ from typing import Any
 from lerobot_omnid.benchmark.robustness_plan import CONTROLS, DEAD, LABELS, Cell
 from lerobot_omnid.measure.charts import error_bars, pyplot, save_figure
 from lerobot_omnid.measure.results import CellResult
-from lerobot_omnid.measure.stats import fisher_exact, rate_difference
+from lerobot_omnid.measure.stats import equal_rates, fisher_exact, rate_difference
 
 ANY_CAMERA = "any one"
 """The perturbation column of a dead-camera variant pooled over its cameras."""
@@ -178,6 +178,25 @@ def target_lines(rows: Sequence[Row]) -> list[str]:
     return [*lines, ""] if len(lines) > 2 else []
 
 
+def draw_spread_lines(rows: Sequence[Row]) -> list[str]:
+    """Per curve level with several draws: the worst and best draw, the median draw, and whether the
+    draws differ more than chance would make them (:func:`equal_rates`): one draw is one sample of a
+    calibration error, so a level's pooled rate hides how much the direction of the error matters."""
+    lines = []
+    for row in rows:
+        if row.condition not in CURVES or len(row.parts) < 2:
+            continue
+        ordered = sorted(row.parts, key=lambda part: part[1] / part[2])
+        worst, best, median = ordered[0], ordered[-1], ordered[(len(ordered) - 1) // 2]
+        test = equal_rates([(k, n) for _, k, n in row.parts])
+        lines.append(
+            f"- {LABELS[row.condition]} at {row.perturbation}, {len(row.parts)} draws: worst {worst[0]} "
+            f"{worst[1]}/{worst[2]}, median {median[1]}/{median[2]}, best {best[0]} {best[1]}/{best[2]}; "
+            f"equal rates across draws: chi2 = {test.chi2:.1f} (df {test.df}), permutation p = {test.p:.2g}"
+        )
+    return ["Spread across draws:", "", *lines, ""] if lines else []
+
+
 def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: str | None) -> list[str]:
     """A checkpoint's section of the report: its use of the cameras (as trained against its controls), the
     issue's targets, the table, the chart."""
@@ -212,6 +231,9 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
             f"| {LABELS[row.condition]} | {row.perturbation} | {r.successes}/{r.episodes} | {_rate(r)} | "
             f"{share} | {against} | {parts} |"
         )
+    spread = draw_spread_lines(rows)
+    if spread:
+        lines += ["", *spread]
     if chart:
         lines += ["", f"![{label}: success against perturbation]({chart})"]
     return [*lines, ""]

@@ -8,7 +8,9 @@ draws: :func:`lerobot_omnid.benchmark.robustness_plan.camera_offsets`), this giv
 displacement of the object's nominal position, their mean (where the fused plane would put the object when
 the cameras agree) and their spread (how much they disagree, which blurs it instead). Beside a robustness
 summary it lists each draw's success, so that a draw that fails can be matched with its displacement and
-with the grasp's tolerance. Pure geometry: no episode is run.
+with the grasp's tolerance: the report relates each draw's success to its mean displacement (Spearman's
+rank correlation per level, and the draws within the tolerance against those beyond it) and draws it,
+``<out>/calibration_shift.png``. Pure geometry: no episode is run.
 
     python -m lerobot_omnid.diagnostics.calibration_shift --out outputs/calibration_shift \\
         --checkpoint outputs/six_tasks/train/omnid/select_apple/checkpoints/last/pretrained_model \\
@@ -25,6 +27,8 @@ import json
 from pathlib import Path
 
 import torch
+from gym_omnid.constants import GRIPPER_MAX_GAP
+from gym_omnid.tasks.select_apple import APPLE_RADIUS
 
 from lerobot_omnid.benchmark.robustness_plan import (
     camera_offsets,
@@ -34,12 +38,17 @@ from lerobot_omnid.benchmark.robustness_plan import (
 from lerobot_omnid.cli import csv_of, positive_int
 from lerobot_omnid.diagnostics import summary
 from lerobot_omnid.geometry import point_seen_on_plane
+from lerobot_omnid.measure.charts import pyplot, save_figure
 from lerobot_omnid.measure.engine import code_commit
 from lerobot_omnid.measure.results import RunSummary, read_run_summary
+from lerobot_omnid.measure.stats import fisher_exact, spearman
 
 PROTOCOL = "calibration_shift"
 MODULE = "lerobot_omnid.diagnostics.calibration_shift"
 APPLE = (0.55, 0.12, 0.035)  # select_apple's apple: the centre of its training square, its centre's height
+GRASP_TOLERANCE_CM = 100 * (GRIPPER_MAX_GAP / 2 - APPLE_RADIUS)
+"""How far the open pads may be off the apple's centre along their closing axis and still close around it."""
+CHART = "calibration_shift.png"
 
 
 def displacements(true: dict, believed: dict, point: torch.Tensor) -> dict[str, list[float]]:
@@ -90,6 +99,69 @@ def draw_successes(
     return found
 
 
+def relation_lines(draws: list[dict]) -> list[str]:
+    """Per level with successes and all levels together: Spearman's rho between a draw's success rate and
+    its mean displacement, and the draws within ``GRASP_TOLERANCE_CM`` pooled against those beyond it
+    (Fisher p). A negative rho and fewer successes beyond the tolerance say the agreed misplacement is what
+    fails the grasp."""
+    measured = [d for d in draws if "successes" in d]
+    groups = [
+        (f"{lv:g} cm, {lv:g} deg", [d for d in measured if d["level"] == lv])
+        for lv in dict.fromkeys(d["level"] for d in measured)
+    ]
+    if len(groups) > 1:
+        groups.append(("all levels", measured))
+    lines = []
+    for name, group in groups:
+        if len(group) < 2:
+            continue
+        rho = spearman([d["mean_cm"] for d in group], [d["successes"] / d["episodes"] for d in group])
+        within = [d for d in group if d["mean_cm"] <= GRASP_TOLERANCE_CM]
+        beyond = [d for d in group if d["mean_cm"] > GRASP_TOLERANCE_CM]
+        counts = [(sum(d["successes"] for d in g), sum(d["episodes"] for d in g)) for g in (within, beyond)]
+        split = (
+            f"{len(within)} draws within {GRASP_TOLERANCE_CM:.1f} cm {counts[0][0]}/{counts[0][1]}, "
+            f"{len(beyond)} beyond {counts[1][0]}/{counts[1][1]}"
+        )
+        if within and beyond:
+            split += f" (Fisher p = {fisher_exact(*counts[0], *counts[1]):.2g})"
+        rho_text = "n/a (constant)" if rho != rho else f"{rho:+.2f}"
+        lines.append(f"- {name}: Spearman rho (success, mean displacement) = {rho_text}; {split}")
+    if not lines:
+        return []
+    return [
+        "",
+        f"Success against the mean displacement (grasp tolerance: the open pads' half-gap less the apple's "
+        f"radius, {GRASP_TOLERANCE_CM:.1f} cm):",
+        "",
+        *lines,
+    ]
+
+
+def shift_chart(draws: list[dict], path: Path) -> Path:
+    """Each draw's success (%) against its mean displacement (cm), a colour per level, the grasp tolerance
+    as a vertical line."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for i, level in enumerate(dict.fromkeys(d["level"] for d in draws)):
+        points = [d for d in draws if d["level"] == level]
+        ax.scatter(
+            [d["mean_cm"] for d in points],
+            [100 * d["successes"] / d["episodes"] for d in points],
+            color=f"C{i}",
+            label=f"{level:g} cm, {level:g} deg",
+        )
+    ax.axvline(GRASP_TOLERANCE_CM, color="gray", ls="--", lw=1, label="grasp tolerance")
+    ax.set(
+        title="Each calibration draw: success against where the plane puts the object",
+        xlabel="mean displacement of the object over the cameras (cm)",
+        ylabel="success (%)",
+        ylim=(-4, 104),
+    )
+    ax.legend(fontsize="small")
+    return save_figure(fig, path)
+
+
 def report_lines(run: RunSummary) -> list[str]:
     s = run.settings
     cameras = list(run.results["draws"][0]["cameras_cm"])
@@ -110,7 +182,7 @@ def report_lines(run: RunSummary) -> list[str]:
             f"| {r['level']:g} | {r['draw']} | {per_camera} | {r['mean_cm']:.1f} | {r['spread_cm']:.1f} | "
             f"{success} |"
         )
-    return lines
+    return [*lines, *relation_lines(run.results["draws"])]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -172,6 +244,9 @@ def main(argv: list[str] | None = None) -> int:
         "point": point.tolist(),
     }
     summary.finish(args, PROTOCOL, MODULE, argv, settings, {"draws": draws}, code_commit(), report_lines)
+    measured = [d for d in draws if "successes" in d]
+    if measured:
+        shift_chart(measured, args.out / CHART)
     return 0
 
 

@@ -7,7 +7,10 @@
 - :func:`mantel_haenszel`: the p-value of two methods compared over several tasks at once (the
   Cochran-Mantel-Haenszel test, stratified by task);
 - :func:`heterogeneity`: how much the difference between two methods varies from task to task (Cochran's
-  Q on the per-task rate differences, and I^2).
+  Q on the per-task rate differences, and I^2);
+- :func:`equal_rates`: whether several success rates differ more than chance would make them (Pearson's
+  chi-squared of the k x 2 table, its p-value by permutation, exact enough for 10 episodes a rate);
+- :func:`spearman`: Spearman's rank correlation of two measurements (e.g. a draw's success and its error).
 
 Rates are fractions in [0, 1]; the report prints them as percentages.
 """
@@ -15,6 +18,8 @@ Rates are fractions in [0, 1]; the report prints them as percentages.
 from __future__ import annotations
 
 import math
+import random
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 Z_95 = 1.959963984540054
@@ -162,3 +167,71 @@ def heterogeneity(strata: list[Counts]) -> Heterogeneity:
     q = sum(w * (d - mean) ** 2 for w, d in zip(weights, differences, strict=True))
     df = len(strata) - 1
     return Heterogeneity(q, df, chi2_sf(q, df), max(0.0, (q - df) / q) if q > 0 else 0.0)
+
+
+@dataclass(frozen=True)
+class EqualRates:
+    """Pearson's chi-squared statistic of a k x 2 table of success counts, its degrees of freedom, and the
+    permutation p-value of that statistic under equal rates."""
+
+    chi2: float
+    df: int
+    p: float
+
+
+def _pearson_chi2(successes: Sequence[int], sizes: Sequence[int]) -> float:
+    total, hits = sum(sizes), sum(successes)
+    if hits in (0, total):
+        return 0.0  # every rate is 0 or every rate is 1: nothing differs
+    rate = hits / total
+    return sum((k - n * rate) ** 2 / (n * rate * (1 - rate)) for k, n in zip(successes, sizes, strict=True))
+
+
+def equal_rates(counts: Sequence[tuple[int, int]], permutations: int = 10_000, seed: int = 0) -> EqualRates:
+    """Whether the success rates ``counts`` = [(successes, episodes), ...] differ more than chance would
+    make them: Pearson's chi-squared of the k x 2 table, its p-value the share of ``permutations`` random
+    reassignments of the pooled outcomes to groups of the same sizes with a statistic at least as large
+    (counting the observed one, so p > 0). The chi-squared distribution itself is poor with 10 episodes a
+    group; the permutation needs no large counts. Seeded: the same counts give the same p."""
+    if len(counts) < 2:
+        raise ValueError(f"counts: expected at least 2 rates to compare, got {len(counts)}")
+    for i, (k, n) in enumerate(counts):
+        _check_counts(k, n, f" of rate {i}")
+    successes, sizes = [k for k, _ in counts], [n for _, n in counts]
+    observed = _pearson_chi2(successes, sizes)
+    outcomes = [1] * sum(successes) + [0] * (sum(sizes) - sum(successes))
+    generator = random.Random(seed)
+    ends = [sum(sizes[: i + 1]) for i in range(len(sizes))]
+    at_least = 0
+    for _ in range(permutations):
+        generator.shuffle(outcomes)
+        groups = [sum(outcomes[end - n : end]) for end, n in zip(ends, sizes, strict=True)]
+        at_least += _pearson_chi2(groups, sizes) >= observed - 1e-12
+    return EqualRates(observed, len(counts) - 1, (at_least + 1) / (permutations + 1))
+
+
+def _ranks(values: Sequence[float]) -> list[float]:
+    """1-based ranks, ties given the mean of the ranks they span."""
+    order = sorted(range(len(values)), key=lambda i: values[i])
+    ranks = [0.0] * len(values)
+    start = 0
+    while start < len(order):
+        end = start
+        while end + 1 < len(order) and values[order[end + 1]] == values[order[start]]:
+            end += 1
+        for i in order[start : end + 1]:
+            ranks[i] = (start + end) / 2 + 1
+        start = end + 1
+    return ranks
+
+
+def spearman(x: Sequence[float], y: Sequence[float]) -> float:
+    """Spearman's rank correlation of paired measurements (Pearson's correlation of their ranks, ties
+    averaged), in [-1, 1]; NaN where either is constant (no order to correlate)."""
+    if len(x) != len(y) or len(x) < 2:
+        raise ValueError(f"x, y: expected two sequences of the same length >= 2, got {len(x)} and {len(y)}")
+    rx, ry = _ranks(x), _ranks(y)
+    mx, my = sum(rx) / len(rx), sum(ry) / len(ry)
+    sxy = sum((a - mx) * (b - my) for a, b in zip(rx, ry, strict=True))
+    sxx, syy = sum((a - mx) ** 2 for a in rx), sum((b - my) ** 2 for b in ry)
+    return sxy / math.sqrt(sxx * syy) if sxx and syy else math.nan

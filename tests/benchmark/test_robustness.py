@@ -37,6 +37,7 @@ from lerobot_omnid.benchmark.robustness_report import (
     checkpoint_lines,
     comparison_chart,
     comparison_lines,
+    draw_spread_lines,
     robustness_chart,
     table_rows,
     target_lines,
@@ -228,6 +229,34 @@ def test_table_pools_draws_and_cameras_and_names_the_controls(tmp_path):
     dp_rows = rows_of({Cell("nominal"): (5, 10), Cell("bumped", 1.0, 1): (2, 10), Cell("blind"): (1, 10)})
     both = comparison_chart({"omnid": rows, "dp": dp_rows}, tmp_path / "both.png")
     assert both.stat().st_size > 10_000
+
+
+def test_spread_across_draws_names_the_worst_draw_and_tests_equal_rates():
+    """A level's draws: worst, median and best named with their counts; draws that split 10/10 and 0/10 differ
+    beyond chance, draws alike do not; one draw (bumped here) and dead cameras give no spread line."""
+    counts = {
+        Cell("nominal"): (9, 10),
+        Cell("calibration", 2.0, 1): (10, 10),
+        Cell("calibration", 2.0, 2): (0, 10),
+        Cell("calibration", 2.0, 3): (6, 10),
+        Cell("calibration", 4.0, 1): (5, 10),
+        Cell("calibration", 4.0, 2): (5, 10),
+        Cell("bumped", 2.0, 1): (7, 10),
+        Cell("dead_black", camera="cam_b"): (5, 10),
+        Cell("dead_black", camera="cam_c"): (3, 10),
+    }
+    lines = draw_spread_lines(rows_of(counts))
+    assert lines[0] == "Spread across draws:" and len(lines) == 5
+    two, four = lines[2], lines[3]
+    assert two.startswith(
+        "- calibration error (scene unchanged) at 2 cm, 2 deg, 3 draws: worst draw 2 0/10, median 6/10, "
+        "best draw 1 10/10; equal rates across draws: chi2 = 20.4 (df 2), permutation p = "
+    )
+    assert float(two.rsplit("= ", 1)[1]) < 0.001
+    assert four.endswith("chi2 = 0.0 (df 1), permutation p = 1")
+    assert draw_spread_lines(rows_of({Cell("nominal"): (5, 10), Cell("calibration", 1.0, 1): (2, 10)})) == []
+    report = "\n".join(checkpoint_lines("omnid", "a checkpoint", rows_of(counts), None))
+    assert "Spread across draws:" in report and "worst draw 2 0/10" in report
 
 
 def test_targets_are_shares_of_as_trained_counted_only_above_blind():

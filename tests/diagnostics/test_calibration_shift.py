@@ -59,6 +59,9 @@ def test_joins_each_draw_with_its_success(tmp_path, monkeypatch):
     draws = read_run_summary(tmp_path / "out", "calibration_shift").results["draws"]
     assert [(d["draw"], d.get("successes")) for d in draws] == [(1, 3), (2, 9), (3, None)]
     assert set(draws[0]["cameras_cm"]) == set(CAMS) and draws[0]["mean_cm"] > 0
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "- 2 cm, 2 deg: Spearman rho (success, mean displacement) = " in report
+    assert (tmp_path / "out" / calibration_shift.CHART).stat().st_size > 10_000
     assert main(["--out", str(tmp_path / "again"), "--report-only", str(tmp_path / "out")]) == 0
     assert "| 2 | 1 |" in (tmp_path / "again" / "report.md").read_text()
     with pytest.raises(SystemExit):
@@ -74,3 +77,24 @@ def test_a_robustness_summary_of_other_draws_or_labels_is_refused(tmp_path, caps
         calibration_shift.draw_successes(tmp_path / "r.json", "omnid", 0)
     with pytest.raises(ValueError, match=r"--label: expected one of \['omnid'\], got 'dp'"):
         calibration_shift.draw_successes(tmp_path / "r.json", "dp", 3)
+
+
+def test_relation_splits_draws_at_the_grasp_tolerance():
+    """The apple (7 cm) in the open pads (9 cm apart) may be 1 cm off; draws beyond it that fail give a
+    negative rho and a split; a level where every draw did alike has no rho."""
+    assert calibration_shift.GRASP_TOLERANCE_CM == pytest.approx(1.0)
+    draws = [
+        {"level": 2.0, "draw": i, "mean_cm": m, "successes": k, "episodes": 10}
+        for i, (m, k) in enumerate([(0.3, 9), (0.8, 8), (1.5, 3), (3.0, 0)], start=1)
+    ] + [
+        {"level": 1.0, "draw": i, "mean_cm": m, "successes": 7, "episodes": 10}
+        for i, m in ((1, 0.2), (2, 0.4))
+    ]
+    lines = calibration_shift.relation_lines(draws)
+    two = next(line for line in lines if line.startswith("- 2 cm"))
+    assert "rho (success, mean displacement) = -1.00" in two
+    assert "2 draws within 1.0 cm 17/20, 2 beyond 3/20 (Fisher p = " in two
+    one = next(line for line in lines if line.startswith("- 1 cm"))
+    assert "n/a (constant)" in one and "beyond 0/0" in one and "Fisher" not in one
+    assert any(line.startswith("- all levels:") for line in lines)
+    assert calibration_shift.relation_lines([{"level": 2.0, "draw": 1, "mean_cm": 1.0}]) == []

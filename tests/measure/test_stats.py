@@ -10,10 +10,12 @@ import pytest
 from lerobot_omnid.measure.stats import (
     Z_95,
     chi2_sf,
+    equal_rates,
     fisher_exact,
     heterogeneity,
     mantel_haenszel,
     rate_difference,
+    spearman,
     wilson_interval,
 )
 
@@ -128,3 +130,32 @@ def test_heterogeneity_separates_a_steady_difference_from_a_reversed_one():
     assert reversed_.p < 1e-6 and reversed_.i2 > 0.9
     with pytest.raises(ValueError, match="strata: expected at least 2 to compare, got 1"):
         heterogeneity([(1, 2, 1, 2)])
+
+
+def test_equal_rates_statistic_and_permutation_p():
+    """Pearson's statistic by hand; draws that all succeed alike are not different (p = 1); 10/10 against
+    0/10 is (the exact two-sided Fisher p of that table is 1.1e-5: the permutation floor is 1/10001);
+    a seed fixes the p-value; counts are checked and named."""
+    # (8, 10), (2, 10): pooled rate 0.5, each cell off by 3 successes: 2 * 9 / 2.5 = 7.2
+    result = equal_rates([(8, 10), (2, 10)], permutations=2000)
+    assert result.chi2 == pytest.approx(7.2) and result.df == 1
+    assert 0.005 < result.p < 0.03  # Fisher's exact two-sided p of this table: 0.023
+    assert equal_rates([(5, 10)] * 10).p == 1.0
+    assert equal_rates([(0, 10)] * 4).chi2 == 0.0
+    extreme = equal_rates([(10, 10), (0, 10)])
+    assert extreme.p == pytest.approx(1 / 10_001)
+    assert equal_rates([(7, 10), (3, 10), (5, 10)]) == equal_rates([(7, 10), (3, 10), (5, 10)])
+    with pytest.raises(ValueError, match="counts: expected at least 2 rates to compare, got 1"):
+        equal_rates([(1, 2)])
+    with pytest.raises(ValueError, match="successes of rate 1: expected an int in"):
+        equal_rates([(1, 2), (3, 2)])
+
+
+def test_spearman_ranks_ties_and_constants():
+    assert spearman([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
+    assert spearman([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
+    # ties share the mean rank: ranks (1.5, 1.5, 3, 4) and (1, 2, 3, 4): r = 4.5 / sqrt(4.5 * 5)
+    assert spearman([0.3, 0.3, 2.0, 9.0], [1, 2, 3, 4]) == pytest.approx(4.5 / math.sqrt(4.5 * 5))
+    assert math.isnan(spearman([1, 1, 1], [1, 2, 3]))
+    with pytest.raises(ValueError, match="got 3 and 2"):
+        spearman([1, 2, 3], [1, 2])
