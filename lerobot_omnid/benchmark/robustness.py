@@ -118,6 +118,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--draws", type=int_at_least(1), default=3, help="random draws per level (default 3)")
     parser.add_argument(
+        "--draw-ids",
+        type=csv_of(int, None),
+        default=(),
+        help="only these draws of each level, e.g. the worst ones of an earlier run (default: 1 .. --draws)",
+    )
+    parser.add_argument(
         "--perturbation-seed",
         type=int_at_least(0),
         default=0,
@@ -307,6 +313,12 @@ def write_outputs(
     return rows
 
 
+def draws_text(settings: Mapping[str, Any]) -> str:
+    """The draws of a run's settings: their number, or which ones where ``--draw-ids`` chose them."""
+    ids = settings.get("draw_ids") or ()
+    return f"draws {', '.join(map(str, ids))}" if ids else str(settings["draws"])
+
+
 def write_report(summary: RunSummary, rows: Mapping[str, Sequence[Row]], out: Path) -> None:
     """``<out>/report.md`` and its charts from a run summary (this run's or a committed one) and its rows
     per checkpoint label."""
@@ -317,8 +329,8 @@ def write_report(summary: RunSummary, rows: Mapping[str, Sequence[Row]], out: Pa
         "",
         f"Command: `{command}`; code commit {summary.commit}. Perturbation level L: every "
         "camera moved by L cm in a random direction and turned by L degrees about a random axis (seeded "
-        f"draws per level: {settings['draws']}, perturbation seed {settings['perturbation_seed']}; level 0 "
-        "is the checkpoint as trained). "
+        f"draws per level: {draws_text(settings)}, perturbation seed {settings['perturbation_seed']}; "
+        "level 0 is the checkpoint as trained). "
         "Success % with Wilson 95 % intervals; against as trained: difference with Newcombe's interval, "
         "two-sided Fisher exact test.",
         "",
@@ -368,6 +380,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--levels: expected numbers >= 0 (cm and degrees), got {list(args.levels)}")
     if args.draws >= DRAW_SEED_STRIDE:
         parser.error(f"--draws: expected at most {DRAW_SEED_STRIDE - 1}, got {args.draws}")
+    if args.draw_ids and not all(1 <= d < DRAW_SEED_STRIDE for d in args.draw_ids):
+        parser.error(f"--draw-ids: expected draws in [1, {DRAW_SEED_STRIDE - 1}], got {list(args.draw_ids)}")
     if min(args.eval_seeds) < 1:
         parser.error(f"--eval-seeds: expected positive integers, got {list(args.eval_seeds)}")
     loaded = load_checkpoints(parser, args.checkpoint)
@@ -384,6 +398,7 @@ def main(argv: list[str] | None = None) -> int:
         args.dead_cameras,
         args.device,
         args.eval_batch_size,
+        tuple(dict.fromkeys(args.draw_ids)),
     )
     out = args.out.resolve()
     folder_settings = check_settings(parser, out, settings, checkpoints)

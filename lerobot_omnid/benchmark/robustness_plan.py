@@ -148,6 +148,12 @@ class RobustnessSettings:
     dead_cameras: tuple[str, ...] | None = None  # None: every camera of each checkpoint
     device: str = "cpu"
     batch_size: int = 5  # envs run at once by each lerobot-eval (episode i still has env seed seed + i)
+    draw_ids: tuple[int, ...] = ()  # only these draws of each level (e.g. the worst ones); empty: 1 .. draws
+
+    @property
+    def draw_numbers(self) -> tuple[int, ...]:
+        """The draws of each level that run: ``draw_ids`` if given, else 1 .. ``draws``."""
+        return self.draw_ids or tuple(range(1, self.draws + 1))
 
     @property
     def mid_episode_step(self) -> int:
@@ -212,7 +218,7 @@ def plan_cells(checkpoint: Checkpoint, settings: RobustnessSettings) -> list[Cel
     levels = [level for level in settings.levels if level > 0]  # level 0 is the nominal cell
     for condition in ("calibration", "bumped"):
         if condition in settings.groups and (checkpoint.is_omnid or condition not in OMNID_ONLY):
-            cells += [Cell(condition, lv, d) for lv in levels for d in range(1, settings.draws + 1)]
+            cells += [Cell(condition, lv, d) for lv in levels for d in settings.draw_numbers]
     if "dead" in settings.groups:
         for condition in DEAD:
             if condition == "dead_removed" and (not checkpoint.is_omnid or len(checkpoint.cameras) < 2):

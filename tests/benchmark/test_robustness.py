@@ -95,6 +95,14 @@ def test_level_zero_file_is_the_calibration_and_level_l_moves_by_l(tmp_path, cal
                 assert moved.K == original[cam].K and moved.image_size == original[cam].image_size
 
 
+def test_draw_ids_pick_draws_and_the_report_names_them():
+    settings = RobustnessSettings("select_apple", draws=3, draw_ids=(7, 2))
+    assert settings.draw_numbers == (7, 2)
+    assert RobustnessSettings("select_apple", draws=3).draw_numbers == (1, 2, 3)
+    assert robustness.draws_text({"draws": 3, "draw_ids": [7, 2]}) == "draws 7, 2"
+    assert robustness.draws_text({"draws": 3}) == "3"  # a summary written before the option
+
+
 def test_draws_are_seeded_different_and_paired_across_levels():
     first = camera_offsets(1.0, 1, 0)
     assert first == camera_offsets(1.0, 1, 0)
@@ -392,6 +400,14 @@ def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations,
     assert "calibration error (scene unchanged) 12" in text
     assert text.count("--eval.batch_size=5 ") == 39  # the mini benchmark's envs at once by default
     assert not out.exists()
+    # --draw-ids: only the draws asked for (each level, the same offsets as in a full run), named by number.
+    capsys.readouterr()
+    argv = ["--checkpoint", str(omnid), "--out", str(out), "--dry-run", "--conditions", "calibration"]
+    assert robustness.main([*argv, "--levels", "2", "--draw-ids", "7,3"]) == 0
+    text = capsys.readouterr().out
+    assert text.count("lerobot-eval --policy.path=") == 3  # as trained, draws 7 and 3
+    assert "calibration/2cm_2deg/draw7" in text and "calibration/2cm_2deg/draw3" in text
+    assert "draw1" not in text and not out.exists()
 
 
 @pytest.mark.parametrize(
@@ -401,6 +417,7 @@ def test_dry_run_prints_every_command_and_writes_nothing(tmp_path, calibrations,
         (["--levels", "0,-1"], "--levels: expected numbers >= 0"),
         (["--draws", "0"], "--draws: expected an integer >= 1"),
         (["--eval-seeds", "0"], "--eval-seeds: expected positive integers"),
+        (["--draw-ids", "0,3"], "--draw-ids: expected draws in [1, 999], got [0, 3]"),
         (["--eval-batch-size", "0"], "--eval-batch-size: expected an integer >= 1"),
         (["--dead-cameras", "cam_a"], "--dead-cameras: expected inputs of checkpoint omnid"),
         (["--conditions", "calibration,nope"], "--conditions: expected comma-separated distinct values"),

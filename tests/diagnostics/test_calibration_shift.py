@@ -82,7 +82,7 @@ def test_a_robustness_summary_of_other_draws_or_labels_is_refused(tmp_path, caps
 def test_relation_splits_draws_at_the_grasp_tolerance():
     """The apple (7 cm) in the open pads (9 cm apart) may be 1 cm off; draws beyond it that fail give a
     negative rho and a split; a level where every draw did alike has no rho."""
-    assert calibration_shift.GRASP_TOLERANCE_CM == pytest.approx(1.0)
+    assert pytest.approx(1.0) == calibration_shift.GRASP_TOLERANCE_CM
     draws = [
         {"level": 2.0, "draw": i, "mean_cm": m, "successes": k, "episodes": 10}
         for i, (m, k) in enumerate([(0.3, 9), (0.8, 8), (1.5, 3), (3.0, 0)], start=1)
