@@ -259,14 +259,21 @@ def cell_counts(
     return counts
 
 
+def shown_path(path: Path) -> str:
+    """``path`` as a report and a committed summary show it: relative to the working folder when inside it,
+    so no one machine's absolute path reaches the repository."""
+    return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else str(path)
+
+
 def describe(checkpoint: Checkpoint, settings: RobustnessSettings) -> str:
     seeds = ", ".join(
         f"{k * EVAL_SEED_STRIDE}-{k * EVAL_SEED_STRIDE + settings.episodes - 1}" for k in settings.eval_seeds
     )
     if len(settings.eval_seeds) > 1:
         seeds += " (each row pools the eval seeds it ran on and is compared with as trained on the same ones)"
+    cameras = ", ".join(checkpoint.cameras)
     return (
-        f"`{checkpoint.path}` (policy `{checkpoint.policy_type}`, cameras {', '.join(checkpoint.cameras)}, "
+        f"`{shown_path(checkpoint.path)}` (policy `{checkpoint.policy_type}`, cameras {cameras}, "
         f"{checkpoint.image_size} px, training seed {checkpoint.train_seed}); {settings.task} ID, env seeds "
         f"{seeds}, episodes of at most {settings.episode_length} steps."
     )
@@ -300,7 +307,7 @@ def write_outputs(
     results = {
         "checkpoints": {
             c.label: {
-                "path": str(c.path),
+                "path": shown_path(c.path),
                 "description": describe(c, settings),
                 "rows": rows_json(rows[c.label]),
             }

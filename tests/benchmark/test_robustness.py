@@ -319,6 +319,17 @@ def test_description_names_every_eval_seed_and_how_rows_pool_them():
     assert "env seeds 1000-1009, 2000-2009 (each row pools the eval seeds it ran on and is compared" in two
 
 
+def test_paths_under_the_working_folder_are_shown_relative(tmp_path, monkeypatch):
+    """A committed summary or report never carries one machine's absolute path."""
+    monkeypatch.chdir(tmp_path)
+    inside = (tmp_path / "outputs" / "ckpt").absolute()
+    checkpoint = Checkpoint("omnid", inside, "omnid", ("cam_b",), 64, {}, 1000)
+    text = robustness.describe(checkpoint, RobustnessSettings("select_apple", eval_seeds=(1,), episodes=10))
+    assert text.startswith("`outputs/ckpt` (policy") and str(tmp_path) not in text
+    outside = tmp_path.parent / "elsewhere"
+    assert robustness.shown_path(outside) == str(outside)
+
+
 def test_no_control_no_verdict_and_no_nominal():
     rows = rows_of({Cell("nominal"): (0, 4)})
     lines = checkpoint_lines("dp", "x", rows, None)
