@@ -19,8 +19,16 @@ from pathlib import Path
 
 import pytest
 
+from lerobot_omnid.benchmark import robustness
 from lerobot_omnid.measure.across_tasks import above
-from lerobot_omnid.measure.results import EvalRecord, check_comparable, collect, merge, read_summary
+from lerobot_omnid.measure.results import (
+    EvalRecord,
+    check_comparable,
+    collect,
+    merge,
+    read_run_summary,
+    read_summary,
+)
 from lerobot_omnid.measure.stats import fisher_exact, mantel_haenszel, wilson_interval
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -47,7 +55,7 @@ COLUMNS = {
     "position bands 0-10 cm": (BANDS, ""),
 }
 """A headline table column header -> (the task-0 settings its cells pool, the control)."""
-WORDS = {"one": 1, "two": 2, "three": 3, "four": 4, "five": 5}
+WORDS = {"one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "ten": 10}
 COUNT = re.compile(r"^\**(\d+)/(\d+)\** \((\d+(?:\.\d+)?)-(\d+(?:\.\d+)?) %\)$")
 """A headline cell: ``74/90 (73-89 %)``, the count possibly bold."""
 P_VALUE = re.compile(r"^\**(< ?)?(\d+(?:\.\d+)?)\**$")
@@ -323,6 +331,45 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     ):
         edited = readme.replace(old, new)
         assert edited != readme and six_task_errors(edited, records) != []
+
+
+CALIBRATION_DRAWS_SUMMARY = "calibration_draws_cpu2.json"
+"""The many-draw calibration curve: docs/results.md's "Robustness" rebuild command reads it."""
+MANY_DRAWS = r"over (\w+) draws a level (\d+), (\d+) and (\d+) of (\d+) at (\d+), (\d+) and (\d+) cm"
+"""The headline's many-draw sentence: draws per level, the pooled successes per level, their episodes."""
+
+
+def many_draw_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
+    """The headline's many-draw calibration counts against the curve's summary."""
+    errors: list[str] = []
+    if m := claim(" ".join(headline_section(readme).split()), MANY_DRAWS, errors):
+        levels = [float(m[i]) for i in (6, 7, 8)]
+        truth = []
+        for level in levels:
+            cells = [
+                r
+                for r in records
+                if r.tag("condition") == "calibration" and float(r.tag("level") or 0) == level
+            ]
+            truth.append((len(cells), sum(r.successes for r in cells), sum(r.episodes for r in cells)))
+        stated = [(WORDS.get(m[1], 0), int(m[i]), int(m[5])) for i in (2, 3, 4)]
+        if stated != truth:
+            errors.append(
+                f"headline: many draws (draws, successes, episodes) per level {stated}; summary {truth}"
+            )
+    return errors
+
+
+def test_readme_many_draw_counts_match_their_summary():
+    records = read_run_summary(SUMMARIES / CALIBRATION_DRAWS_SUMMARY, robustness.PROTOCOL).evaluations
+    readme = README.read_text()
+    assert many_draw_errors(readme, records) == []
+    for old, new in (
+        ("79, 77 and 79 of 100", "79, 78 and 79 of 100"),
+        ("at 1, 2 and 4 cm", "at 1, 2 and 3 cm"),
+    ):
+        edited = readme.replace(old, new)
+        assert edited != readme and many_draw_errors(edited, records) != []
 
 
 @pytest.fixture(scope="module")
