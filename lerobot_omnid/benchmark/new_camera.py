@@ -277,6 +277,7 @@ def write_report(summary: RunSummary, path: Path) -> None:
             frozen = ", ".join(hypothesis.get("frozen", ()))
             pretrained = pretrained_name(FewshotRecipe(**hypothesis))
             tuning = f"{hypothesis['steps']} steps, {lr}" + (f", {frozen} frozen" if frozen else "")
+            tuning += ", B-E episodes replayed" if hypothesis.get("replay") else ""
         else:
             pretrained, tuning = model.removeprefix("zero_shot_"), "none (zero-shot)"
         chosen = "**yes**" if model == summary.results["selected"] else ""

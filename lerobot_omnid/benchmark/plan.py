@@ -192,6 +192,10 @@ class BenchmarkProfile:
         return tuple(c for c in method_controls(method) if c in self.controls)
 
 
+NEW_CAMERA_RECIPE = FewshotRecipe("long", "1000 steps", 1000)
+"""The new-camera validation's selection (docs/results/new_camera_validation_cpu2.json): 1000 fine-tuning
+steps at the training learning rate, every weight trained."""
+
 # mini uses 64 px images: ResNet-18 forward+backward on a batch's 64 images takes 2.7 s at 96 px on some
 # 2-core machines, which would put the profile over its 2-hour budget; 64 px has 0.44x the pixels.
 # fmt: off
@@ -243,6 +247,14 @@ PROFILES = {
         MINI, name="rigs-validation", heldout_episodes=0, eval_episodes=10, eval_seeds=(81,),
         settings=("id", *RIG_SETTINGS), control_settings=(), controls=(), fuse_last_step_only=True,
         variants=RIG_VARIANTS,
+    ),
+    # The new camera's test (docs/benchmark.md#a-new-camera-its-protocol): mini-fewshot with the recipe the
+    # validation selected (NEW_CAMERA_RECIPE) beside the paper's, two training seeds, two disjoint ranges
+    # of 15 test episodes per cell and the probe; run with the validation's --out to reuse its runs.
+    "new-camera": dataclasses.replace(
+        MINI, name="new-camera", heldout_episodes=0, settings=("id",), fewshot=True, eval_episodes=15,
+        eval_seeds=(1, 2), train_seeds=(TRAIN_SEED, TRAIN_SEED + 1),
+        fewshot_recipes=(PAPER_RECIPE, NEW_CAMERA_RECIPE), fewshot_probe=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,

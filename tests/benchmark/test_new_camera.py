@@ -4,15 +4,18 @@ the report work from the validation counts alone."""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import pytest
 
 from lerobot_omnid.benchmark import new_camera as nc
 from lerobot_omnid.benchmark import task_sizing
+from lerobot_omnid.benchmark.methods import PAPER_RECIPE
 from lerobot_omnid.benchmark.plan import (
     EVAL_SEED_STRIDE,
     FEWSHOT_SEED,
     HELDOUT_SEED,
+    NEW_CAMERA_RECIPE,
     PROFILES,
     TASK0,
     build_plan,
@@ -21,6 +24,8 @@ from lerobot_omnid.benchmark.readout_selection import VALIDATION_HELDOUT_SEED, V
 from lerobot_omnid.diagnostics.position_extrapolation import PROBE_SEED
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.results import EvalRecord, RunSummary, write_run_summary
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def options(cmd: tuple[str, ...]) -> dict[str, str]:
@@ -114,6 +119,7 @@ def test_rule_takes_the_most_successes_then_the_shortest_fine_tuning(successes, 
 
 def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
     results = {"zero_shot_mini": (1, 20), "paper": (3, 20), "long": (7, 20), "long_frozen_head": (2, 20)}
+    results["long_replay"] = (5, 20)
     settings = {
         "task": TASK0,
         "validation_seed": nc.VALIDATION_SEED,
@@ -131,6 +137,7 @@ def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
     assert "| zero_shot_mini | mini | none (zero-shot) | 1/20 (0.9-23.6 %) |  |" in report
     assert "| long | mini | 1000 steps, mini's lr | 7/20 (18.1-56.7 %) |  |" in report
     assert "| long_frozen_head | mini | 1000 steps, mini's lr, head frozen | 2/20 (" in report
+    assert "| long_replay | mini | 1000 steps, mini's lr, B-E episodes replayed | 5/20 (" in report
 
 
 def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
@@ -149,3 +156,23 @@ def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
         found = {r.key[0]: (r.successes, r.episodes, r.commit) for r in summary.evaluations}
         assert found[hypothesis] == (counts[hypothesis], 20, "abc")
         assert summary.results["selected"] == ("long" if len(found) == len(counts) else None)
+
+
+def test_the_test_profile_is_the_committed_selection_on_the_validations_runs(tmp_path):
+    """``new-camera`` fine-tunes by the recipe the validation selected, beside the paper's, and reuses the
+    validation's recordings and pre-trained OmniD (the same commands in the same --out)."""
+    validation = json.loads((ROOT / "docs" / "results" / "new_camera_validation_cpu2.json").read_text())
+    selected = validation["results"]["selected"]
+    profile = PROFILES["new-camera"]
+    assert profile.fewshot_recipes == (PAPER_RECIPE, NEW_CAMERA_RECIPE)
+    assert dataclasses.replace(nc.HYPOTHESES[selected], label=NEW_CAMERA_RECIPE.label) == NEW_CAMERA_RECIPE
+    assert (profile.train_seeds, profile.eval_seeds, profile.eval_episodes) == ((1000, 1001), (1, 2), 15)
+    test_runs = {r.name: r.cmd for r in build_plan(profile, tmp_path, (TASK0,))}
+    validation_runs = {r.name: r.cmd for r in nc.protocol(tmp_path)}
+    for name in ("record/select_apple_bcde", "record/select_apple_a_fewshot", "train/omnid/select_apple"):
+        assert test_runs[name] == validation_runs[name], name
+    tuned = options(test_runs[f"finetune/omnid_{selected}/select_apple"])
+    chosen = options(validation_runs[f"finetune_validation/{selected}"])
+    assert {k: v for k, v in tuned.items() if k != "--output_dir"} == {
+        k: v for k, v in chosen.items() if k != "--output_dir"
+    }
