@@ -61,6 +61,7 @@ WRITERS = {
     "omnid-robustness": "lerobot_omnid.benchmark.robustness",
     "task_sizing": "lerobot_omnid.benchmark.task_sizing",
     "rigs_and_wrist": "lerobot_omnid.benchmark.rigs_and_wrist",
+    "new_camera": "lerobot_omnid.benchmark.new_camera",
     "readout_selection": "lerobot_omnid.benchmark.readout_selection",
     "position_extrapolation": "lerobot_omnid.diagnostics.position_extrapolation",
     "action_reach": "lerobot_omnid.diagnostics.action_reach",
