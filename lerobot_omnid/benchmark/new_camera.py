@@ -28,8 +28,9 @@ The protocol (docs/benchmark.md#a-new-camera-its-protocol), fixed before any of 
    :class:`~lerobot_omnid.benchmark.methods.FewshotRecipe`), in a profile committed once it is selected; run
    with this protocol's ``--out``, it reuses its recordings and pre-trained models (the same commands).
 
-Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``,
-``<out>/summary.json`` and, once every hypothesis is validated, ``<out>/selection.json``.
+Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``report.md``,
+``summary.json`` and, once every hypothesis is validated, ``selection.json`` in ``<out>/validation/`` (the
+test's own report and summary go to ``<out>``).
 
     MUJOCO_GL=egl python -m lerobot_omnid.benchmark.new_camera --out outputs/new_camera
 """
@@ -119,8 +120,14 @@ def finetuned_dir(out: Path, hypothesis: str) -> Path:
     return out / "finetune_validation" / hypothesis
 
 
+def results_dir(out: Path) -> Path:
+    """Where the report, the summary and the selection go: not ``out`` itself, whose ``summary.json`` and
+    ``report.md`` are the test's (``omnid-benchmark --profile new-camera`` runs in the same ``--out``)."""
+    return out / "validation"
+
+
 def validation_dir(out: Path, model: str) -> Path:
-    return out / "validation" / model
+    return results_dir(out) / model
 
 
 def records(out: Path) -> list[Run]:
@@ -301,15 +308,17 @@ def main(argv: list[str] | None = None) -> int:
     runs = protocol(out)
     commit = code_commit()
 
+    results = results_dir(out)
+
     def write_outputs() -> None:
         summary = summarise(out, runs, commit)
-        out.mkdir(parents=True, exist_ok=True)
-        write_run_summary(out / SUMMARY, summary)
+        results.mkdir(parents=True, exist_ok=True)
+        write_run_summary(results / SUMMARY, summary)
         selected = summary.results["selected"]
-        if selected and not (out / SELECTION_FILE).is_file():
+        if selected and not (results / SELECTION_FILE).is_file():
             selection = {"selected": selected, "rule": select.__doc__, "commit": commit}
-            (out / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
-        write_report(summary, out / "report.md")
+            (results / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
+        write_report(summary, results / "report.md")
 
     run_protocol(runs, out, "new camera", write_outputs, args.dry_run, args.report_only)
     return 0

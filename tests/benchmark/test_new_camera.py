@@ -176,3 +176,8 @@ def test_the_test_profile_is_the_committed_selection_on_the_validations_runs(tmp
     assert {k: v for k, v in tuned.items() if k != "--output_dir"} == {
         k: v for k, v in chosen.items() if k != "--output_dir"
     }
+    # The validation's report, summary and selection live where none of the test's runs or outputs go.
+    results = nc.results_dir(tmp_path)
+    assert results != tmp_path
+    for run in build_plan(profile, tmp_path, (TASK0,)):
+        assert not run.output.is_relative_to(results), run.name
