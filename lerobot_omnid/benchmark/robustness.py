@@ -36,7 +36,7 @@ from typing import Any
 
 from gym_omnid.constants import CAMERAS, MAX_EPISODE_STEPS, TASKS
 
-from lerobot_omnid.benchmark.control_calibration import control_calibrations
+from lerobot_omnid.benchmark.controls import control_calibrations
 from lerobot_omnid.benchmark.plan import EVAL_SEED_STRIDE, TASK0
 from lerobot_omnid.benchmark.robustness_plan import (
     CONTROLS,

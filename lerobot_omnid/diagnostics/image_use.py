@@ -24,7 +24,7 @@ import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 from lerobot.utils.constants import ACTION, OBS_STATE
 
-from lerobot_omnid.diagnostics.offline_eval import POSITION, load_policy
+from lerobot_omnid.diagnostics.checkpoints import POSITION, load_policy
 
 
 def chunk_action(

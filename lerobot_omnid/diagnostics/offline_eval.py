@@ -33,11 +33,11 @@ from tqdm import tqdm
 
 from lerobot_omnid.calibration.frame_columns import extrinsics_key, intrinsics_key
 from lerobot_omnid.cli import positive_int
+from lerobot_omnid.diagnostics.checkpoints import GRIPPER, POSITION, ROT6D, load_policy
 
 if TYPE_CHECKING:
     from lerobot.configs.policies import PreTrainedConfig
 
-POSITION, ROT6D, GRIPPER = slice(0, 3), slice(3, 9), 9  # layout of the gym_omnid action
 # The gym_omnid state starts with the measured pose and gripper in the action's layout: as an action it
 # means "stay where you are", the reference a policy that learned anything must beat.
 ACTION_DIM = GRIPPER + 1
@@ -58,24 +58,6 @@ def action_errors(predicted: np.ndarray, expert: np.ndarray) -> dict[str, float]
         "rotation_deg": rotation_angle_deg(predicted[ROT6D], expert[ROT6D]),
         "gripper": float(abs(predicted[GRIPPER] - expert[GRIPPER])),
     }
-
-
-def load_policy(checkpoint: Path, meta, device: str):
-    """(policy, preprocessor, postprocessor) of a checkpoint, loaded as ``lerobot-eval`` loads it."""
-    from lerobot.configs.policies import PreTrainedConfig
-    from lerobot.policies import make_policy, make_pre_post_processors
-
-    config = PreTrainedConfig.from_pretrained(checkpoint)
-    config.pretrained_path = checkpoint
-    config.device = device
-    policy = make_policy(config, ds_meta=meta)
-    policy.eval()
-    preprocessor, postprocessor = make_pre_post_processors(
-        policy_cfg=config,
-        pretrained_path=str(checkpoint),
-        preprocessor_overrides={"device_processor": {"device": device}},
-    )
-    return policy, preprocessor, postprocessor
 
 
 def policy_inputs(config: PreTrainedConfig) -> list[str]:

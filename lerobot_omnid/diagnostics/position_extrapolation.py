@@ -38,17 +38,15 @@ from pathlib import Path
 
 import torch
 from gym_omnid.constants import BACKGROUNDS, POSITION_BANDS
-from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
-from lerobot.utils.constants import ACTION
+from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
 from torch import Tensor
-from tqdm import tqdm
 
 from lerobot_omnid.benchmark.commands import record_command, recorded_episodes
 from lerobot_omnid.benchmark.plan import PROBE_MODULE as MODULE
 from lerobot_omnid.benchmark.plan import PROBE_PROTOCOL as PROTOCOL
 from lerobot_omnid.benchmark.plan import PROBE_SET as VALIDATION
 from lerobot_omnid.benchmark.plan import TASK0
-from lerobot_omnid.diagnostics.offline_eval import GRIPPER, POSITION, load_policy
+from lerobot_omnid.diagnostics.checkpoints import expert_frames, load_policy
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX
 from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
@@ -57,24 +55,6 @@ FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest)
 PROBE_SEED = 400_000  # first env seed of the probe's recordings
 RIDGE_WEIGHTS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)  # per sample, on standardised features
 BATCH = 32
-
-
-def probe_frames(root: Path, frames: range = FRAMES) -> tuple[list[dict[str, Tensor]], Tensor]:
-    """The dataset items of ``frames`` of every episode and the grasp x-y (N, 2) of each."""
-    dataset = LeRobotDataset(f"local/{root.name}", root=root, video_backend="pyav")
-    episodes, rows = dataset.meta.episodes, dataset.hf_dataset.with_format("torch")
-    items, grasp = [], []
-    for e in tqdm(range(dataset.meta.total_episodes), desc=f"frames {root.name}", unit="episode"):
-        start, end = int(episodes["dataset_from_index"][e]), int(episodes["dataset_to_index"][e])
-        actions = torch.stack([rows[i][ACTION] for i in range(start, end)])
-        closing = (actions[:, GRIPPER] > 0.5).nonzero()
-        if len(closing) == 0 or int(closing[0, 0]) <= max(frames):
-            raise ValueError(f"{root} episode {e}: expected the gripper to close after frame {max(frames)}")
-        xy = actions[int(closing[0, 0]), POSITION][:2]
-        for f in frames:
-            items.append(dataset[start + f])
-            grasp.append(xy)
-    return items, torch.stack(grasp)
 
 
 def image_condition(policy, observation: dict[str, Tensor]) -> Tensor:
@@ -231,10 +211,10 @@ def main(argv: list[str] | None = None) -> int:
     image_keys = [k for k in meta.features if k.startswith(IMAGE_KEY_PREFIX)]
     cameras = [k.removeprefix(IMAGE_KEY_PREFIX) for k in image_keys]
     image_size = meta.features[image_keys[0]]["shape"][0]
-    roots = {VALIDATION: record(args.out, "id", cameras, image_size, args.episodes)}
+    roots = {"train": args.train_root, VALIDATION: record(args.out, "id", cameras, image_size, args.episodes)}
     roots |= {band: record(args.out, band, cameras, image_size, args.episodes) for band in POSITION_BANDS}
     roots |= {t: record(args.out, "id", cameras, image_size, args.episodes, background=t) for t in tables}
-    frames = {"train": probe_frames(args.train_root)} | {name: probe_frames(r) for name, r in roots.items()}
+    frames = {name: expert_frames(root, FRAMES) for name, root in roots.items()}
 
     results = {}
     for name, checkpoint in checkpoints.items():

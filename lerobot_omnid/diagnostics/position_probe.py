@@ -26,7 +26,7 @@ from lerobot.configs.policies import PreTrainedConfig
 from torch import Tensor, nn
 from tqdm import tqdm
 
-from lerobot_omnid.diagnostics.position_extrapolation import probe_frames
+from lerobot_omnid.diagnostics.checkpoints import expert_frames
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 FRAMES = range(0, 21, 4)  # before any expert grasp in distribution (the first close is at frame 22 or later)
@@ -35,7 +35,7 @@ SCALE_M = 0.03  # targets in units of 3 cm
 
 def load_frames(root: Path, keys: list[str]) -> tuple[Tensor, Tensor, Tensor]:
     """Images (N, S, 3, H, W) of ``FRAMES`` of every episode, grasp x-y (N, 2) and episode index (N,)."""
-    items, grasp = probe_frames(root, FRAMES)
+    items, grasp = expert_frames(root, FRAMES)
     images = torch.stack([torch.stack([item[k] for k in keys]) for item in items])
     return images, grasp, torch.tensor([int(item["episode_index"]) for item in items])
 

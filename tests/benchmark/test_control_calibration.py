@@ -12,12 +12,8 @@ import torch
 from lerobot.configs.policies import PreTrainedConfig
 from omnid_testing import STATE_DIM, tiny_config
 
-from lerobot_omnid.benchmark.control_calibration import (
-    control_calibrations,
-    main,
-    permuted,
-    turned_away,
-)
+from lerobot_omnid.benchmark.control_calibration import main
+from lerobot_omnid.benchmark.controls import control_calibrations, permuted, turned_away
 from lerobot_omnid.benchmark.methods import PERTURBED_LEVEL
 from lerobot_omnid.calibration.rig_file import load_calibration_file
 from lerobot_omnid.calibration.schema import CameraCalibration
