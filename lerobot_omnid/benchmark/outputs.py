@@ -97,11 +97,15 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
         "(`--eval.batch_size`; episode i keeps env seed start + i).",
         "- Training seeds (the `--seed` of every `lerobot-train`, each a full repetition of the training "
         f"runs and their evaluations on the same datasets and env seeds): {folders}.",
-        f"- Controls on {where}, the same checkpoint evaluated in the settings "
-        f"{', '.join(p.control_settings) or '(none)'}: blind (only the state can drive it) for every method"
-        + "".join(f", {CONTROL_LABELS[c]} for OmniD" for c in p.controls if c != "blind")
-        + "; a background OOD's blind control is the ID one's (same env seeds and layouts; a blind policy "
-        "sees no table).",
+        (
+            f"- Controls on {where}, the same checkpoint evaluated in the settings "
+            f"{', '.join(p.control_settings)}: blind (only the state can drive it) for every method"
+            + "".join(f", {CONTROL_LABELS[c]} for OmniD" for c in p.controls if c != "blind")
+            + "; a background OOD's blind control is the ID one's (same env seeds and layouts; a blind "
+            "policy sees no table)."
+            if p.control_settings
+            else f"- Controls on {where}: none for the models trained on cameras B-E."
+        ),
         "- Position-shift curve: the graded bands "
         + ", ".join(f"`{b}` ({low:g}-{high:g} cm)" for b, (low, high) in BANDS_CM.items() if b in p.settings)
         + " outside the training square, L-inf; same success rule."

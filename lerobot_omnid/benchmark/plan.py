@@ -250,9 +250,11 @@ PROFILES = {
     ),
     # The new camera's test (docs/benchmark.md#a-new-camera-its-protocol): mini-fewshot with the recipe the
     # validation selected (NEW_CAMERA_RECIPE) beside the paper's, two training seeds, two disjoint ranges
-    # of 15 test episodes per cell and the probe; run with the validation's --out to reuse its runs.
+    # of 15 test episodes per cell and the probe; run with the validation's --out to reuse its runs. The
+    # B-E models' controls are mini's (measured there): only the fine-tuned models' blind controls run.
     "new-camera": dataclasses.replace(
-        MINI, name="new-camera", heldout_episodes=0, settings=("id",), fewshot=True, eval_episodes=15,
+        MINI, name="new-camera", heldout_episodes=0, settings=("id",), control_settings=(), fewshot=True,
+        eval_episodes=15,
         eval_seeds=(1, 2), train_seeds=(TRAIN_SEED, TRAIN_SEED + 1),
         fewshot_recipes=(PAPER_RECIPE, NEW_CAMERA_RECIPE), fewshot_probe=True,
     ),

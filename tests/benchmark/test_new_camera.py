@@ -171,6 +171,9 @@ def test_the_test_profile_is_the_committed_selection_on_the_validations_runs(tmp
     validation_runs = {r.name: r.cmd for r in nc.protocol(tmp_path)}
     for name in ("record/select_apple_bcde", "record/select_apple_a_fewshot", "train/omnid/select_apple"):
         assert test_runs[name] == validation_runs[name], name
+    # Controls: each fine-tuned model's blind one; the B-E models' are mini's, not run again.
+    controls = [name for name in test_runs if name.startswith(("eval_", "calibration/"))]
+    assert controls and all("/fewshot_a/" in name and "blind" in name for name in controls), controls
     tuned = options(test_runs[f"finetune/omnid_{selected}/select_apple"])
     chosen = options(validation_runs[f"finetune_validation/{selected}"])
     assert {k: v for k, v in tuned.items() if k != "--output_dir"} == {
