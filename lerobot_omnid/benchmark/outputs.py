@@ -20,6 +20,7 @@ from lerobot_omnid.benchmark.methods import (
     CONTROLS,
     METHODS,
     VQBET_CAMERA,
+    FewshotRecipe,
     ablation_flags,
     control_flags,
     fewshot_model,
@@ -205,21 +206,37 @@ def ordered_models(p: BenchmarkProfile, records: Sequence[results.EvalRecord]) -
 
 
 def comparison_lines(
-    records: list[results.EvalRecord], methods: Sequence[str], tasks: Sequence[str], labels: Mapping[str, str]
+    records: list[results.EvalRecord],
+    methods: Sequence[str],
+    tasks: Sequence[str],
+    labels: Mapping[str, str],
+    recipes: Sequence[FewshotRecipe] = (),
 ) -> list[str]:
-    """OmniD against every other method, cell by cell, with Fisher tests (pooled and per training seed)."""
+    """OmniD against every other method, cell by cell, with Fisher tests (pooled and per training seed); each
+    few-shot recipe's OmniD against the other methods fine-tuned by the same recipe (another method's
+    recipe model is compared with no other OmniD)."""
     cells = [(t, s) for t in tasks if t != TASK0 for s in SETTINGS]
     cells = [(TASK0, s) for s in SETTINGS] + cells + [(TASK0, FEWSHOT), (TASK1, FEWSHOT)]
-    others = [m for m in methods if m != "omnid"]
-    return [
+    tuned = {m: [fewshot_model(m, r) for r in recipes if r.name] for m in METHODS}
+    alike = {t for m, names in tuned.items() if m != "omnid" for t in names}
+    lines = [
         "",
         "## OmniD against each method, cell by cell",
         "",
         "Episodes pooled over eval and training seeds; difference with Newcombe's 95 % interval (pp); "
         "two-sided Fisher exact test.",
         "",
-        *report.comparison_table(records, "omnid", others, cells, labels),
+        *report.comparison_table(
+            records, "omnid", [m for m in methods if m not in {"omnid", *alike}], cells, labels
+        ),
     ]
+    for recipe in (r for r in recipes if r.name and fewshot_model("omnid", r) in methods):
+        others = [fewshot_model(m, recipe) for m in METHODS if m != "omnid"]
+        lines += ["", f"Fine-tuned by the recipe `{recipe.name}` ({recipe.label}), each method alike:", ""]
+        lines += report.comparison_table(
+            records, fewshot_model("omnid", recipe), [o for o in others if o in methods], cells[-2:], labels
+        )
+    return lines
 
 
 def fewshot_control_lines(
@@ -450,7 +467,7 @@ def write_outputs(
         lines += ["", f"## Task 0 ({TASK0}): generalisation and few-shot on camera A, success rate (%)", ""]
         lines += report.generalisation_table(cells, methods, TASK0, TASK1, BACKGROUND_OODS, labels)
         if "omnid" in methods and len(methods) > 1:
-            lines += comparison_lines(records, methods, tasks, labels)
+            lines += comparison_lines(records, methods, tasks, labels, p.fewshot_recipes)
         if any(r.control for r in records):
             control_of = {
                 (s, c): control_setting(s, c, p.control_settings) for s in SETTINGS for c in CONTROLS

@@ -121,6 +121,12 @@ def test_report_has_a_row_per_recipe_beside_its_blind_control(monkeypatch, tmp_p
     omnid = [f"| {label}", "blind", "fewshot_a", "8/10 (49.0-94.3 %)", "1/10 (1.8-40.4 %)"]
     dp = ["| DP 1000 steps, head frozen", "blind", "fewshot_a", "0/10 (0.0-27.8 %)", "0/10 (0.0-27.8 %)"]
     assert omnid in rows and dp in rows
+    # OmniD's recipe model against DP's by the same recipe; DP's recipe model never against another OmniD.
+    comparison = report.split("## OmniD against each method, cell by cell")[1].split("\n## ")[0]
+    recipe_table = comparison.split("each method alike:")[1]
+    assert f"| {TASK1} | fewshot_a | DP 1000 steps, head frozen | 8/10 (49.0-94.3 %) | 0/10" in recipe_table
+    assert comparison.count("| DP 1000 steps, head frozen |") == 2  # one row per few-shot task
+    assert f"| {TASK1} | fewshot_a | DP | 6/10" in comparison
     assert '`--policy.frozen_modules=["head"]`' in report  # its options, with their reasons
     probe = report.split(f"## Few-shot on camera A, {TASK0}: where each fine-tuned model places the apple")[1]
     assert "| OmniD 1000 steps, head frozen | 2.00 |" in probe and "| DP | 10.00 |" in probe
