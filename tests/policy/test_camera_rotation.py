@@ -32,7 +32,9 @@ def test_each_camera_is_warped_and_turned_by_its_own_rotation(per_frame):
         Ks = K[b, t, s] if per_frame else K[b, s]
         grid = rotation_warp_grid(Ks, rotation[b, s], (H, H), (H, H))
         expected = F.grid_sample(images[b, t, s][None], grid[None], padding_mode="zeros", align_corners=False)
-        assert torch.allclose(warped[b, t, s], expected[0], atol=1e-6)
+        # 1e-4: the batched grid differs from the single one by float32 rounding (up to 1.1e-5 measured);
+        # another camera's rotation moves pixels by O(0.1).
+        assert torch.allclose(warped[b, t, s], expected[0], atol=1e-4)
         T_bs = cam_T_world[b, t, s] if per_frame else cam_T_world[b, s]
         new = turned[b, t, s] if per_frame else turned[b, s]
         assert torch.allclose(new[:3, :3], rotation[b, s] @ T_bs[:3, :3], atol=1e-6)
