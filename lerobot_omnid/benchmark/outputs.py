@@ -217,8 +217,7 @@ def comparison_lines(
     recipe model is compared with no other OmniD)."""
     cells = [(t, s) for t in tasks if t != TASK0 for s in SETTINGS]
     cells = [(TASK0, s) for s in SETTINGS] + cells + [(TASK0, FEWSHOT), (TASK1, FEWSHOT)]
-    tuned = {m: [fewshot_model(m, r) for r in recipes if r.name] for m in METHODS}
-    alike = {t for m, names in tuned.items() if m != "omnid" for t in names}
+    alike = {fewshot_model(m, r) for m in METHODS if m != "omnid" for r in recipes if r.name}
     lines = [
         "",
         "## OmniD against each method, cell by cell",
