@@ -21,9 +21,9 @@ logs to <out>/logs/.
     omnid-benchmark --report-only --out A --also B docs/results/mini_seed1002_eval30_cpu2.json  # 3 folders
 
 A campaign longer than one machine's session continues in a fresh folder from its committed summary:
-``--resume-from docs/results/<campaign>.json`` keeps the planned evaluations it holds (matched by
-fingerprint, so a summary of another plan keeps nothing) and records and trains only what the missing ones
-need, each dataset and model just before its first use; the new ``summary.json`` holds both.
+``--resume-from docs/results/<campaign>.json`` keeps the planned evaluations and few-shot probes it holds
+(matched by fingerprint, so a summary of another plan keeps nothing) and records and trains only what the
+missing ones need, each dataset and model just before its first use; the new ``summary.json`` holds both.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import sys
 from pathlib import Path
 
 from lerobot_omnid.benchmark.methods import METHODS
-from lerobot_omnid.benchmark.outputs import settings_markdown, write_outputs, write_summary
+from lerobot_omnid.benchmark.outputs import settings_markdown, summary_probes, write_outputs, write_summary
 from lerobot_omnid.benchmark.plan import (
     PROFILES,
     RIG_SETTINGS,
@@ -176,22 +176,25 @@ def main(argv: list[str] | None = None) -> int:
         )
     out = (args.out or Path(f"outputs/benchmark_{p.name}")).resolve()
 
-    def comparable_records(path: Path, option: str) -> list[results.EvalRecord]:
-        """The evaluations of a summary of this same experiment; otherwise an error naming ``option``."""
+    def comparable_summary(path: Path, option: str) -> results.RunSummary:
+        """A summary of this same experiment; otherwise an error naming ``option``."""
         try:
-            profile, records = results.read_summary(path)
-            results.check_comparable(dataclasses.asdict(p), profile, str(path))
+            summary = results.read_run_summary(path, results.BENCHMARK)
+            results.check_comparable(dataclasses.asdict(p), summary.settings["profile"], str(path))
         except ValueError as e:
             parser.error(f"{option}: {e}")
-        return records
+        return summary
 
     for path in args.also:  # before running anything: a summary that cannot be combined is an error now
-        comparable_records(path, "--also")
-    resumed = comparable_records(args.resume_from, "--resume-from") if args.resume_from else []
+        comparable_summary(path, "--also")
+    resumed = comparable_summary(args.resume_from, "--resume-from") if args.resume_from else None
     commit = code_commit()
     command = ["omnid-benchmark", *(sys.argv[1:] if argv is None else argv)]
     runs = build_plan(p, out, tasks)
-    recorded = {r.fingerprint for r in resumed if r.fingerprint}
+    recorded = set()
+    if resumed is not None:
+        recorded = {r.fingerprint for r in resumed.evaluations if r.fingerprint}
+        recorded |= {e["fingerprint"] for e in summary_probes(resumed)}
     print("\n".join(settings_markdown(p, tasks)))
     kinds = ("record", "merge", "prepare", "train", "calibration", "eval", "offline")
     kinds = {k: sum(r.kind == k for r in runs) for k in kinds}
@@ -200,11 +203,11 @@ def main(argv: list[str] | None = None) -> int:
     todo = len(to_run)
     stale = sum(state(r) == "stale" for r in to_run)
     redo = f" ({stale} made for another plan: rerun)" if stale else ""
-    n_kept = sum(r.kind == "eval" and r.fingerprint in recorded for r in runs)
+    n_kept = sum(r.kind in ("eval", "probe") and r.fingerprint in recorded for r in runs)
     unplanned = len(recorded - {r.fingerprint for r in runs})
-    kept = f", {n_kept} evaluations kept from {args.resume_from}" if args.resume_from else ""
+    kept = f", {n_kept} results kept from {args.resume_from}" if args.resume_from else ""
     if unplanned:  # e.g. other tasks: not in this folder's summary.json, keep the file they are in
-        kept += f" ({unplanned} of its evaluations are not in this plan and not in this folder's summary)"
+        kept += f" ({unplanned} of its results are not in this plan and not in this folder's summary)"
     print(f"\nPlan: {len(runs)} runs ({per_kind}), {todo} to run{redo}{kept}; {out}")
     if args.dry_run:
         print("\n".join(describe_plan(runs, recorded)))
@@ -213,8 +216,8 @@ def main(argv: list[str] | None = None) -> int:
     def write() -> dict:
         return write_outputs(p, tasks, runs, out, args.also, commit, command, resumed)
 
-    def keep(run: Run) -> None:  # summary.json after every finished evaluation: a kill loses nothing done
-        if run.kind == "eval":
+    def keep(run: Run) -> None:  # summary.json after every finished result: a kill loses nothing done
+        if run.kind in ("eval", "probe"):
             write_summary(p, tasks, runs, out, commit, command, resumed)
 
     try:

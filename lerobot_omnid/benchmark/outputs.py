@@ -11,6 +11,7 @@ import dataclasses
 import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from gym_omnid.constants import POSITION_BANDS, TRAIN_CAMERAS
 
@@ -59,6 +60,9 @@ from lerobot_omnid.measure.engine import Run, is_done, portable_command, stamp_c
 from lerobot_omnid.measure.report import MISSING
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
+PROBES = "probes"
+"""Key, in a benchmark summary's results, of its few-shot probes: each run's fingerprint, training seed and
+its models' errors (``probe_cm``, and ``mean_cm`` for predicting the training mean)."""
 BANDS_CM = {band: (100 * low, 100 * high) for band, (low, high) in POSITION_BANDS.items()}
 """The graded position bands: distance outside the training square, cm."""
 PAPER_TABLE_1 = {  # ID success (%), multi-view B-E, the paper's VLABench fork (not these envs)
@@ -252,15 +256,30 @@ def fewshot_control_lines(
     return lines
 
 
-def fewshot_probe_lines(runs: Sequence[Run], labels: Mapping[str, str]) -> list[str]:
-    """Each fine-tuned task-0 model's probe error on fresh camera-A episodes, per training seed (none
-    before a probe run is done)."""
+def probe_entry(run: Run) -> dict[str, Any]:
+    """A finished probe run as its benchmark summary keeps it (:data:`PROBES`)."""
+    models = results.read_run_summary(run.output, PROBE_PROTOCOL).results["models"]
+    return {
+        "fingerprint": run.fingerprint,
+        "train_seed": run.train_seed,
+        "models": {model: found["sets"][PROBE_SET] for model, found in models.items()},
+    }
+
+
+def summary_probes(summary: results.RunSummary) -> list[dict[str, Any]]:
+    """The probe entries of a benchmark summary (none in one written before it kept them)."""
+    return list(summary.results.get(PROBES, []))
+
+
+def fewshot_probe_lines(probes: Sequence[Mapping[str, Any]], labels: Mapping[str, str]) -> list[str]:
+    """Each fine-tuned task-0 model's probe error on fresh camera-A episodes, per training seed, from probe
+    entries (:data:`PROBES`; none before a probe run is done)."""
     errors: dict[str, dict[int | None, float]] = {}
     mean = None
-    for run in (r for r in runs if r.kind == "probe" and is_done(r)):
-        for model, found in results.read_run_summary(run.output, PROBE_PROTOCOL).results["models"].items():
-            errors.setdefault(model, {})[run.train_seed] = found["sets"][PROBE_SET]["probe_cm"]
-            mean = found["sets"][PROBE_SET]["mean_cm"]
+    for entry in probes:
+        for model, found in entry["models"].items():
+            errors.setdefault(model, {})[entry["train_seed"]] = found["probe_cm"]
+            mean = found["mean_cm"]
     if not errors:
         return []
     seeds = sorted({s for by_seed in errors.values() for s in by_seed})
@@ -404,20 +423,27 @@ def write_summary(
     out: Path,
     commit: str | None = None,
     command: Sequence[str] = (),
-    resumed: Sequence[results.EvalRecord] = (),
-) -> tuple[list[results.EvalEntry], list[results.EvalRecord]]:
-    """summary.json: the finished evaluations of ``runs`` (cheap: rewritten after every evaluation, so that
-    a killed campaign loses nothing done), with the ``resumed`` records (an earlier campaign's summary) of
-    the planned evaluations not done here. Returns every planned evaluation and the records of the done."""
+    resumed: results.RunSummary | None = None,
+) -> tuple[list[results.EvalEntry], list[results.EvalRecord], list[dict[str, Any]]]:
+    """summary.json: the finished evaluations and probes of ``runs`` (cheap: rewritten after every
+    evaluation, so that a killed campaign loses nothing done), with those of the ``resumed`` summary (an
+    earlier campaign's) that are planned and not done here. Returns every planned evaluation, the records of
+    the done and the probe entries."""
     evaluations = [r for r in runs if r.kind == "eval"]
     entries = [eval_entry(r) for r in evaluations]
     done = [is_done(r) for r in evaluations]
     own = [results.record_of(e) for e, made in zip(entries, done, strict=True) if made]
     missing = {r.fingerprint for r, made in zip(evaluations, done, strict=True) if not made}
-    own += [r for r in resumed if r.fingerprint in missing]
+    probe_runs = [r for r in runs if r.kind == "probe"]
+    probes = [probe_entry(r) for r in probe_runs if is_done(r)]
+    if resumed is not None:
+        own += [r for r in resumed.evaluations if r.fingerprint in missing]
+        missing = {r.fingerprint for r in probe_runs if not is_done(r)}
+        probes += [e for e in summary_probes(resumed) if e["fingerprint"] in missing]
     out.mkdir(parents=True, exist_ok=True)
-    results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command)
-    return entries, own
+    found = {PROBES: probes} if probes else {}
+    results.write_summary(out / results.SUMMARY, dataclasses.asdict(p), tasks, own, commit, command, found)
+    return entries, own, probes
 
 
 def write_outputs(
@@ -428,17 +454,19 @@ def write_outputs(
     also: Sequence[Path] = (),
     commit: str | None = None,
     command: Sequence[str] = (),
-    resumed: Sequence[results.EvalRecord] = (),
+    resumed: results.RunSummary | None = None,
 ) -> dict:
-    """summary.json (this folder's evaluations and the ``resumed`` ones), then report.md, benchmark.png,
-    position_curve.png and results.json from them and from the summaries of ``also`` (other folders or
-    summary files)."""
-    entries, own = write_summary(p, tasks, runs, out, commit, command, resumed)
+    """summary.json (this folder's evaluations and probes and the ``resumed`` ones), then report.md,
+    benchmark.png, position_curve.png and results.json from them and from the summaries of ``also`` (other
+    folders or summary files)."""
+    entries, own, own_probes = write_summary(p, tasks, runs, out, commit, command, resumed)
     groups = [own]
+    probes = {e["fingerprint"]: e for e in own_probes}
     for path in also:
-        profile, records = results.read_summary(path)
-        results.check_comparable(dataclasses.asdict(p), profile, str(path))
-        groups.append(records)
+        other = results.read_run_summary(path, results.BENCHMARK)
+        results.check_comparable(dataclasses.asdict(p), other.settings["profile"], str(path))
+        groups.append(other.evaluations)
+        probes |= {e["fingerprint"]: e for e in summary_probes(other)}
     records = results.merge(groups)
     methods = ordered_models(p, records)
     labels = p.labels
@@ -476,7 +504,7 @@ def write_outputs(
                 records, methods, TASK0, SETTINGS, control_of, labels, CONTROL_LABELS
             )
         lines += fewshot_control_lines(records, methods, labels)
-        lines += fewshot_probe_lines(runs, labels)
+        lines += fewshot_probe_lines(list(probes.values()), labels)
         lines += rig_lines(cells, methods, labels)
         if any((m, TASK0, b) in cells for m in methods for b in BANDS):
             curve = charts.position_curve_chart(

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import subprocess
-import sys
 from pathlib import Path
 
 import torch
@@ -46,10 +45,12 @@ from lerobot_omnid.benchmark.plan import PROBE_MODULE as MODULE
 from lerobot_omnid.benchmark.plan import PROBE_PROTOCOL as PROTOCOL
 from lerobot_omnid.benchmark.plan import PROBE_SET as VALIDATION
 from lerobot_omnid.benchmark.plan import TASK0
+from lerobot_omnid.diagnostics import summary
 from lerobot_omnid.diagnostics.checkpoints import expert_frames, load_policy
 from lerobot_omnid.keys import IMAGE_KEY_PREFIX
+from lerobot_omnid.measure.engine import code_commit, portable_command
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
+from lerobot_omnid.measure.results import RunSummary, read_run_summary
 
 FRAMES = range(0, 17, 4)  # before the expert's grasp (frame 20 at the earliest): the object is unmoved
 PROBE_SEED = 400_000  # first env seed of the probe's recordings
@@ -189,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                 if name in merged:
                     parser.error(f"--report-only: expected each model once, got {name!r} again in {path}")
                 merged[name] = result
-        write_report(merged, args.out / "report.md")
+        write_markdown(probe_lines(merged), args.out / "report.md")
         return 0
     if args.train_root is None or not args.checkpoint:
         parser.error(
@@ -221,21 +222,22 @@ def main(argv: list[str] | None = None) -> int:
         policy, preprocessor, _ = load_policy(checkpoint, meta, args.device)
         sets = {k: (features_of(policy, preprocessor, items), grasp) for k, (items, grasp) in frames.items()}
         validation, train = sets.pop(VALIDATION), sets.pop("train")
-        results[name] = {"checkpoint": str(checkpoint), **probe(train, validation, sets)}
+        found = probe(train, validation, sets)
+        results[name] = {"checkpoint": portable_command([str(checkpoint)])[0], **found}
         for t in tables:
             results[name]["sets"][t]["table_shift"] = table_shift(train[0], validation[0], sets[t][0])
-    args.out.mkdir(parents=True, exist_ok=True)
     settings = {"probe_seed": PROBE_SEED, "episodes": args.episodes, "tables": tables}
-    command = ["python", "-m", MODULE, *(sys.argv[1:] if argv is None else argv)]
-    summary = RunSummary(PROTOCOL, settings, results={"models": results}, command=command)
-    write_run_summary(args.out / SUMMARY, summary)
-    write_report(results, args.out / "report.md")
+    summary.finish(args, PROTOCOL, MODULE, argv, settings, {"models": results}, code_commit(), report_lines)
     return 0
 
 
-def write_report(results: dict[str, dict], path: Path) -> None:
+def report_lines(found: RunSummary) -> list[str]:
+    return probe_lines(found.results["models"])
+
+
+def probe_lines(results: dict[str, dict]) -> list[str]:
     """The probe's tables (error per set and model; with tables, each table's shift) from the models' probe
-    results of one run summary or several merged, written to ``path`` and printed."""
+    results of one run summary or several merged."""
     names = list(results)
     lines = ["| set | " + " | ".join(f"{n} probe (cm)" for n in names) + " | training mean (cm) |"]
     lines.append("| --- |" + " --- |" * (len(names) + 1))
@@ -249,7 +251,7 @@ def write_report(results: dict[str, dict], path: Path) -> None:
         for t in tables:
             shifts = [f"{results[n]['sets'][t].get('table_shift', float('nan')):.2f}" for n in names]
             lines.append(f"| {t} | " + " | ".join(shifts) + " |")
-    write_markdown(lines, path)
+    return lines
 
 
 if __name__ == "__main__":

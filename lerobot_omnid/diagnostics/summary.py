@@ -9,6 +9,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from lerobot_omnid.measure.engine import portable_command
 from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import SUMMARY, RunSummary, read_run_summary, write_run_summary
 
@@ -59,9 +60,9 @@ def finish(
     commit: str | None,
     report_lines: ReportLines,
 ) -> None:
-    """``<out>/summary.json`` (with the command, ``python -m module`` and its arguments, and ``commit``) and
-    ``<out>/report.md``."""
-    command = ["python", "-m", module, *(sys.argv[1:] if argv is None else argv)]
+    """``<out>/summary.json`` (with ``commit`` and the command: ``python -m module`` and its arguments, paths
+    under the current folder relative to it) and ``<out>/report.md``."""
+    command = portable_command(["python", "-m", module, *(sys.argv[1:] if argv is None else argv)])
     summary = RunSummary(protocol, settings, results=results, commit=commit, command=command)
     args.out.mkdir(parents=True, exist_ok=True)
     write_run_summary(args.out / SUMMARY, summary)

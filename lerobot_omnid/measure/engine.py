@@ -160,7 +160,7 @@ def is_done(run: Run) -> bool:
 
 def schedule(runs: Sequence[Run], recorded: Collection[str] = ()) -> list[Run]:
     """The runs still to run, in the order to run them: every run that is not done and whose result is not
-    ``recorded`` (fingerprints of evaluations kept in an earlier campaign's run summary), each preceded by
+    ``recorded`` (fingerprints of results kept in an earlier campaign's run summary), each preceded by
     those of its needs not done yet, so that a dataset or a model is made just before its first use. A run
     whose consumers are all done or recorded is not run: a campaign resumed in a fresh folder from its
     committed summary trains only the models whose evaluations are missing."""

@@ -264,12 +264,13 @@ def write_summary(
     records: Sequence[EvalRecord],
     commit: str | None,
     command: Sequence[str],
+    results: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a benchmark folder's ``summary.json``: its profile and tasks, the code commit and command that
-    wrote it, and every evaluation record of the folder (its own and those resumed from an earlier summary of
-    the same plan, never ones merged with ``--also``)."""
+    wrote it, every evaluation record of the folder (its own and those resumed from an earlier summary of
+    the same plan, never ones merged with ``--also``) and its ``results`` that are not success counts."""
     settings = {"profile": dict(profile), "tasks": list(tasks)}
-    return write_run_summary(path, RunSummary(BENCHMARK, settings, records, {}, commit, command))
+    return write_run_summary(path, RunSummary(BENCHMARK, settings, records, results or {}, commit, command))
 
 
 def read_summary(path: Path) -> tuple[dict[str, Any], list[EvalRecord]]:

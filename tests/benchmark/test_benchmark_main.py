@@ -132,6 +132,35 @@ def test_report_has_a_row_per_recipe_beside_its_blind_control(monkeypatch, tmp_p
     assert "| OmniD 1000 steps, head frozen | 2.00 |" in probe and "| DP | 10.00 |" in probe
 
 
+def test_probe_is_kept_in_the_summary_and_resumed_from_it(monkeypatch, tmp_path):
+    """The few-shot probe's errors travel in summary.json: a fresh folder resumed from it neither trains
+    nor probes again, and a report merged with it (``--also``) shows them."""
+    tuned = dataclasses.replace(PROFILES["mini-fewshot"], fewshot_probe=True)
+    monkeypatch.setitem(PROFILES, "mini-fewshot", tuned)
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    calls: list[str] = []
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {"omnid": 60.0}))
+    first, profile = tmp_path / "first", ["--profile", "mini-fewshot"]
+    assert bench.main([*profile, "--out", str(first)]) == 0
+    done = json.loads((first / "summary.json").read_text())
+    [probe] = done["results"]["probes"]
+    assert probe["train_seed"] == 1000 and probe["models"]["omnid"] == {"probe_cm": 4.0, "mean_cm": 4.47}
+    committed = tmp_path / "committed.json"
+    committed.write_text(json.dumps(done))
+
+    calls.clear()
+    fresh = tmp_path / "fresh"
+    assert bench.main([*profile, "--out", str(fresh), "--resume-from", str(committed)]) == 0
+    assert calls == []
+    assert json.loads((fresh / "summary.json").read_text())["results"] == done["results"]
+    heading = f"## Few-shot on camera A, {TASK0}: where each fine-tuned model places the apple"
+    merged = tmp_path / "merged"
+    assert bench.main([*profile, "--out", str(merged), "--report-only", "--also", str(committed)]) == 0
+    for folder in (fresh, merged):
+        probe_table = (folder / "report.md").read_text().split(heading)[1]
+        assert "| OmniD | 4.00 |" in probe_table and "| DP | 10.00 |" in probe_table
+
+
 def test_main_runs_reports_and_resumes(monkeypatch, tmp_path, capsys):
     calls: list[str] = []
     rates = {"omnid": 60.0, "diffusion": 20.0, "omnid/scrambled": 10.0}
@@ -256,7 +285,7 @@ def test_resume_from_a_committed_summary_in_a_fresh_folder(monkeypatch, tmp_path
     other = [*options, "--eval-episodes", "4", "--resume-from", str(committed)]
     assert bench.main(["--out", str(tmp_path / "other"), *other]) == 0
     assert calls.count("lerobot-eval") == len(done["evaluations"])
-    assert "0 evaluations kept from" in capsys.readouterr().out
+    assert "0 results kept from" in capsys.readouterr().out
 
 
 def test_failed_run_blocks_what_needs_it(monkeypatch, tmp_path, capsys):

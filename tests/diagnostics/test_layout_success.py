@@ -53,9 +53,11 @@ def test_replays_the_layouts_of_a_benchmark_summarys_evaluations(tmp_path, monke
         key = ("omnid", "select_apple", "id")
         records.append(EvalRecord(key, "", 1000, k, sum(successes), 3, "summary.json", "c", command))
     write_run_summary(tmp_path / "summary.json", RunSummary(BENCHMARK, {"profile": {}}, records))
-    args = ["--out", "diag", "--summary", "summary.json", "--task", "select_apple"]
-    assert main(args) == 0
+    args = ["--out", str(tmp_path / "diag"), "--summary", str(tmp_path / "summary.json")]
+    assert main([*args, "--task", "select_apple"]) == 0
     summary = read_run_summary(tmp_path / "diag", "layout_success")
+    # the command as a committed summary keeps it: no folder of this machine
+    assert summary.command[3:7] == ["--out", "diag", "--summary", "summary.json"]
     model = summary.results["models"]["omnid"]
     assert (model["successes"], model["episodes"]) == (3, 6) and summary.commit == "abc123"
     assert {"apple.x", "apple.y", "bowl.x", "bowl.y"} <= set(model["axes"])  # distractors too
