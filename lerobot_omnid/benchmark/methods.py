@@ -277,7 +277,7 @@ class FewshotRecipe:
 
     name: str
     label: str  # e.g. "1000 steps"
-    steps: int | None = None  # None: the profile's finetune_steps
+    steps: int | None = None  # None: the profile's finetune_steps; 0: zero-shot, on task 0 only
     lr: float | None = None  # None: the method's training learning rate
     frozen: tuple[str, ...] = ()  # OmniD only: --policy.frozen_modules
     replay: bool = False  # OmniD only: the camera-A episodes merged with as many replayed B-E ones

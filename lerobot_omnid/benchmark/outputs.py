@@ -52,6 +52,7 @@ from lerobot_omnid.benchmark.plan import (
     multitask,
     multitask_steps,
     seed_folder,
+    zero_shot_options,
 )
 from lerobot_omnid.benchmark.variant_selection import selection_lines
 from lerobot_omnid.measure import across_tasks, charts, report, results
@@ -165,6 +166,11 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
             rows += [(f"{labels[m]} fine-tune", f, why) for f, why in base_tuning]
             for recipe in (r for r in p.method_recipes(m) if r.name):
                 who = labels[fewshot_model(m, recipe)]
+                if recipe.steps == 0:
+                    rows.append((who, "no fine-tuning", f"the start model on camera A as is, {TASK0} only"))
+                    why = "camera A alone, its true calibration read from every frame"
+                    rows += [(who, f, why) for f in zero_shot_options(m)]
+                    continue
                 if recipe.steps:
                     rows.append((who, f"--steps={recipe.steps}", "the recipe's fine-tuning steps"))
                 if recipe.start:

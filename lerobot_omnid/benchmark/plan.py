@@ -132,7 +132,8 @@ class BenchmarkProfile:
 
     def __post_init__(self) -> None:
         """Variants: distinct names that are no method's or other model's, of a method the profile trains.
-        Few-shot recipes: distinct names, each starting from the method as trained or an OmniD variant."""
+        Few-shot recipes: distinct names, each starting from the method as trained or an OmniD variant; a
+        zero-shot one (0 steps) with nothing else to follow."""
         names = [v.name for v in self.variants]
         for v in self.variants:
             if v.method not in self.methods or v.name in LABELS or names.count(v.name) > 1:
@@ -152,6 +153,11 @@ class BenchmarkProfile:
                 raise ValueError(
                     f"fewshot_recipes: expected distinct names, each starting from one of {starts}, got "
                     f"{r.name!r} starting from {r.start!r}"
+                )
+            if r.steps == 0 and (r.lr is not None or r.frozen or r.replay):
+                raise ValueError(
+                    f"fewshot_recipes: {r.name!r}: expected a zero-shot recipe (steps 0) to have no learning "
+                    f"rate, frozen parts or replay, got lr {r.lr}, frozen {r.frozen}, replay {r.replay}"
                 )
 
     @property
@@ -195,6 +201,8 @@ class BenchmarkProfile:
 NEW_CAMERA_RECIPE = FewshotRecipe("long", "1000 steps", 1000)
 """The new-camera validation's selection (docs/results/new_camera_validation_cpu2.json): 1000 fine-tuning
 steps at the training learning rate, every weight trained."""
+ZERO_SHOT_RECIPE = FewshotRecipe("zero_shot", "zero-shot", 0)
+"""No fine-tuning: each task-0 model on camera A as it is (:func:`zero_shot_options`)."""
 
 # mini uses 64 px images: ResNet-18 forward+backward on a batch's 64 images takes 2.7 s at 96 px on some
 # 2-core machines, which would put the profile over its 2-hour budget; 64 px has 0.44x the pixels.
@@ -249,14 +257,15 @@ PROFILES = {
         variants=RIG_VARIANTS,
     ),
     # The new camera's test (docs/benchmark.md#a-new-camera-its-protocol): mini-fewshot with the recipe the
-    # validation selected (NEW_CAMERA_RECIPE) beside the paper's, two training seeds, two disjoint ranges
-    # of 15 test episodes per cell and the probe; run with the validation's --out to reuse its runs. The
-    # B-E models' controls are mini's (measured there): only the fine-tuned models' blind controls run.
+    # validation selected (NEW_CAMERA_RECIPE) beside the paper's and zero-shot, two training seeds, two
+    # disjoint ranges of 15 test episodes per cell and the probe; run with the validation's --out to reuse
+    # its runs. The B-E models' controls are mini's (measured there): only the camera-A models' blind
+    # controls run.
     "new-camera": dataclasses.replace(
         MINI, name="new-camera", heldout_episodes=0, settings=("id",), control_settings=(), fewshot=True,
         eval_episodes=15,
         eval_seeds=(1, 2), train_seeds=(TRAIN_SEED, TRAIN_SEED + 1),
-        fewshot_recipes=(PAPER_RECIPE, NEW_CAMERA_RECIPE), fewshot_probe=True,
+        fewshot_recipes=(PAPER_RECIPE, NEW_CAMERA_RECIPE, ZERO_SHOT_RECIPE), fewshot_probe=True,
     ),
     "paper": BenchmarkProfile(
         name="paper", methods=METHODS, tasks=None, episodes=50, fewshot_episodes=10, image_size=128,
@@ -300,10 +309,22 @@ def rig_options(setting: str, method: str, cameras: Sequence[str]) -> list[str]:
     if setting not in RIG_SETTINGS:
         return []
     options = [f"--env.rig={setting.removeprefix('rig_')}"]
-    if method == "omnid":
-        keys = json_list([image_key(c) for c in cameras])
-        options += ["--env.per_frame_calibration=true", f"--policy.frame_calibration={keys}"]
-    return options
+    return options + (frame_calibration_options(cameras) if method == "omnid" else [])
+
+
+def frame_calibration_options(cameras: Sequence[str]) -> list[str]:
+    """``lerobot-eval`` options with which OmniD reads ``cameras``' true calibration from every frame."""
+    keys = json_list([image_key(c) for c in cameras])
+    return ["--env.per_frame_calibration=true", f"--policy.frame_calibration={keys}"]
+
+
+def zero_shot_options(method: str) -> list[str]:
+    """``lerobot-eval`` options of a zero-shot evaluation on camera A: OmniD's B-E model takes camera A
+    alone, with its true calibration read from every frame (the checkpoint holds none of it); the others'
+    camera-A copy needs none."""
+    if method != "omnid":
+        return []
+    return ["--policy.cameras=" + json_list(CAMERA_A), *frame_calibration_options(CAMERA_A)]
 
 
 def control_setting(setting: str, control: str, control_settings: Sequence[str]) -> str | None:
@@ -446,15 +467,17 @@ def plan_models(
         control_options: Sequence[str] = (),
         needs: Sequence[str] = (),
         method: str = "",
+        checkpoint: Path | None = None,
     ) -> None:
-        """Evaluate ``trained`` as ``model`` in ``settings``; a moved rig's needs ``method``."""
+        """Evaluate ``trained`` (its ``checkpoint``, by default the one it trained) as ``model`` in
+        ``settings``; a moved rig's needs ``method``."""
         folder = f"eval_{control}" if control else "eval"
         for setting in settings:
             layout, background = setting_env(setting)
             for k in p.eval_seeds:
                 output = root / folder / model / task / setting / f"seed{k}"
                 cmd = eval_command(
-                    trained.output / CHECKPOINT_SUBDIR,
+                    checkpoint or trained.output / CHECKPOINT_SUBDIR,
                     output,
                     task,
                     layout,
@@ -582,7 +605,8 @@ def plan_models(
             cmd += ["--dst", str(copy), "--cameras", ",".join(CAMERA_A)]
             name = f"{prefix}prepare/{method}/cam_a"
             needs = (f"{prefix}{task0_folder}/{method}/{TASK0}",)
-            runs.append(Run(name, "prepare", tuple(cmd), copy, needs, train_seed=train_seed))
+            prepared = Run(name, "prepare", tuple(cmd), copy, needs, train_seed=train_seed)
+            runs.append(prepared)
         for recipe in p.method_recipes(method):
             model = fewshot_model(method, recipe)
             if method != "omnid":
@@ -590,6 +614,14 @@ def plan_models(
             else:
                 start_run = f"{prefix}{task0_folder}/{recipe.start or method}/{TASK0}"
                 start = root / task0_folder / (recipe.start or method) / TASK0 / CHECKPOINT_SUBDIR
+            if recipe.steps == 0:  # zero-shot: the start model as it is, on its own task only
+                started = prepared if method != "omnid" else next(r for r in runs if r.name == start_run)
+                options = zero_shot_options(method)
+                # blind: black images (OmniD's turned-away control file would hold the B-E cameras)
+                black = [f"--env.blackout_cameras=[{','.join(CAMERA_A)}]", *options]
+                for control, flags in (("", options), ("blind", black)):
+                    evaluate(started, model, TASK0, (FEWSHOT,), CAMERA_A, control, flags, checkpoint=start)
+                continue
             for task in fewshot_tasks:
                 flags = [f"--policy.path={start}", f"--policy.device={p.device}"]
                 flags += ["--policy.push_to_hub=false", *(f for f, _ in recipe_flags(method, recipe))]

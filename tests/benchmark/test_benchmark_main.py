@@ -17,7 +17,7 @@ from omnid_testing import by_name, flag
 import lerobot_omnid.benchmark.benchmark as bench
 from lerobot_omnid.benchmark import new_camera
 from lerobot_omnid.benchmark import plan as plan_module
-from lerobot_omnid.benchmark.methods import ABLATIONS, PAPER_RECIPE
+from lerobot_omnid.benchmark.methods import ABLATIONS, PAPER_RECIPE, FewshotRecipe
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, TASK1, TRAIN_SEED, build_plan
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import CHECKPOINT
@@ -130,6 +130,24 @@ def test_report_has_a_row_per_recipe_beside_its_blind_control(monkeypatch, tmp_p
     assert '`--policy.frozen_modules=["head"]`' in report  # its options, with their reasons
     probe = report.split(f"## Few-shot on camera A, {TASK0}: where each fine-tuned model places the apple")[1]
     assert "| OmniD 1000 steps, head frozen | 2.00 |" in probe and "| DP | 10.00 |" in probe
+
+
+def test_zero_shot_models_are_rows_beside_their_blind_controls(monkeypatch, tmp_path):
+    recipes = (PAPER_RECIPE, FewshotRecipe("zero_shot", "zero-shot", 0))
+    monkeypatch.setitem(
+        PROFILES, "mini-fewshot", dataclasses.replace(PROFILES["mini-fewshot"], fewshot_recipes=recipes)
+    )
+    monkeypatch.setattr(bench, "code_commit", lambda: "abc123")
+    calls: list[str] = []
+    monkeypatch.setattr(engine, "run_logged", _fake_tools(calls, {"omnid_zero_shot": 30.0}))
+    assert bench.main(["--profile", "mini-fewshot", "--out", str(tmp_path)]) == 0
+    assert calls.count("lerobot-train") == 2 + 4  # B-E models, then the paper's fine-tuning only
+    report = (tmp_path / "report.md").read_text()
+    section = report.split(f"## Few-shot on camera A, {TASK0}: each fine-tuned model against its blind")[1]
+    assert "| OmniD zero-shot | blind | fewshot_a | 3/10 (10.8-60.3 %) | 0/10 (0.0-27.8 %) |" in section
+    assert "| DP zero-shot | blind | fewshot_a | 0/10 (0.0-27.8 %) | 0/10 (0.0-27.8 %) |" in section
+    assert "| OmniD zero-shot | `--env.per_frame_calibration=true` |" in report
+    assert "| DP zero-shot | `no fine-tuning` |" in report
 
 
 def test_probe_is_kept_in_the_summary_and_resumed_from_it(monkeypatch, tmp_path):

@@ -115,3 +115,26 @@ def test_fewshot_probe_reads_every_fine_tuned_task0_model(tmp_path):
     expected = ["omnid", "omnid_long_frozen_head", "omnid_single_camera_long", "omnid_long_replay"]
     assert named == [*expected, "diffusion", "diffusion_long_frozen_head"]
     assert set(probes[0].needs) == {f"record/{TASK0}_a_fewshot", *(f"finetune/{m}/{TASK0}" for m in named)}
+
+
+def test_a_zero_shot_recipe_evaluates_the_start_models_on_camera_a(tmp_path):
+    """Steps 0: no fine-tuning; the B-E OmniD takes camera A alone with its calibration from every frame,
+    DP its camera-A copy; each beside a black-image blind control; task 0 only."""
+    zero_shot = FewshotRecipe("zero_shot", "zero-shot", 0)
+    runs = by_name(build_plan(profile((PAPER_RECIPE, zero_shot), ()), tmp_path, (TASK0,)))
+    assert not [n for n in runs if "zero_shot" in n and runs[n].kind != "eval"]
+    assert not [n for n in runs if "zero_shot" in n and TASK1 in n]
+    omnid = runs[f"eval/omnid_zero_shot/{TASK0}/{FEWSHOT}/seed1"]
+    assert omnid.result == ("omnid_zero_shot", TASK0, FEWSHOT) and omnid.needs == (f"train/omnid/{TASK0}",)
+    assert flag(omnid.cmd, "policy.path") == str(tmp_path / "train" / "omnid" / TASK0 / CHECKPOINT)
+    assert flag(omnid.cmd, "policy.cameras") == '["cam_a"]' and flag(omnid.cmd, "env.cameras") == "[cam_a]"
+    assert flag(omnid.cmd, "env.per_frame_calibration") == "true"
+    assert flag(omnid.cmd, "policy.frame_calibration") == '["observation.images.cam_a"]'
+    blind = runs[f"eval_blind/omnid_zero_shot/{TASK0}/{FEWSHOT}/seed1"]
+    assert blind.control == "blind" and flag(blind.cmd, "env.blackout_cameras") == "[cam_a]"
+    assert flag(blind.cmd, "env.per_frame_calibration") == "true"
+    dp = runs[f"eval/diffusion_zero_shot/{TASK0}/{FEWSHOT}/seed1"]
+    assert dp.needs == ("prepare/diffusion/cam_a",) and "--env.per_frame_calibration=true" not in dp.cmd
+    assert flag(dp.cmd, "policy.path") == str(runs["prepare/diffusion/cam_a"].output)
+    with pytest.raises(ValueError, match=r"expected a zero-shot recipe \(steps 0\) to have no learning rate"):
+        profile((PAPER_RECIPE, FewshotRecipe("zero_shot", "zero-shot", 0, lr=1e-4)), ())

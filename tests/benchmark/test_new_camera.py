@@ -18,6 +18,7 @@ from lerobot_omnid.benchmark.plan import (
     NEW_CAMERA_RECIPE,
     PROFILES,
     TASK0,
+    ZERO_SHOT_RECIPE,
     build_plan,
 )
 from lerobot_omnid.benchmark.readout_selection import VALIDATION_HELDOUT_SEED, VALIDATION_SEED
@@ -159,19 +160,19 @@ def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
 
 
 def test_the_test_profile_is_the_committed_selection_on_the_validations_runs(tmp_path):
-    """``new-camera`` fine-tunes by the recipe the validation selected, beside the paper's, and reuses the
-    validation's recordings and pre-trained OmniD (the same commands in the same --out)."""
+    """``new-camera`` fine-tunes by the recipe the validation selected, beside the paper's and zero-shot,
+    and reuses the validation's recordings and pre-trained OmniD (the same commands in the same --out)."""
     validation = json.loads((ROOT / "docs" / "results" / "new_camera_validation_cpu2.json").read_text())
     selected = validation["results"]["selected"]
     profile = PROFILES["new-camera"]
-    assert profile.fewshot_recipes == (PAPER_RECIPE, NEW_CAMERA_RECIPE)
+    assert profile.fewshot_recipes == (PAPER_RECIPE, NEW_CAMERA_RECIPE, ZERO_SHOT_RECIPE)
     assert dataclasses.replace(nc.HYPOTHESES[selected], label=NEW_CAMERA_RECIPE.label) == NEW_CAMERA_RECIPE
     assert (profile.train_seeds, profile.eval_seeds, profile.eval_episodes) == ((1000, 1001), (1, 2), 15)
     test_runs = {r.name: r.cmd for r in build_plan(profile, tmp_path, (TASK0,))}
     validation_runs = {r.name: r.cmd for r in nc.protocol(tmp_path)}
     for name in ("record/select_apple_bcde", "record/select_apple_a_fewshot", "train/omnid/select_apple"):
         assert test_runs[name] == validation_runs[name], name
-    # Controls: each fine-tuned model's blind one; the B-E models' are mini's, not run again.
+    # Controls: each camera-A model's blind one; the B-E models' are mini's, not run again.
     controls = [name for name in test_runs if name.startswith(("eval_", "calibration/"))]
     assert controls and all("/fewshot_a/" in name and "blind" in name for name in controls), controls
     tuned = options(test_runs[f"finetune/omnid_{selected}/select_apple"])
