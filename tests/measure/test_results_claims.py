@@ -333,6 +333,60 @@ def test_readme_six_task_counts_match_the_campaign_summary():
         assert edited != readme and six_task_errors(edited, records) != []
 
 
+NEW_CAMERA_SUMMARIES = ("new-camera_seed1000_cpu2.json", "new-camera_seed1001_cpu2.json")
+"""The new camera's two-seed test: docs/results.md's "Few-shot on camera A" test rebuild pools these."""
+NEW_CAMERA_SENTENCE = (
+    r"with 1000 steps OmniD (\d+)/(\d+) vs DP (\d+)/(\d+) on `select_apple` \(p = ([\d.<\s]+)\), "
+    r"OmniD above its blind control \((\d+)/(\d+), p = ([\d.]+)\), DP not"
+)
+"""The headline's new-camera sentence: the selected recipe's (``long``) OmniD and DP counts, their Fisher p,
+OmniD's blind control and its p."""
+ZERO_SHOT_SENTENCE = r"zero-shot OmniD (\d+)/(\d+), DP (\d+)/(\d+)"
+
+
+def new_camera_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
+    """The headline's new-camera counts and claims against the test's summaries."""
+    errors: list[str] = []
+    text = " ".join(headline_section(readme).split())
+    cells, blind = collect(records), collect(records, "blind")
+    omnid, dp = (cells[(model, TASK0, "fewshot_a")] for model in ("omnid_long", "diffusion_long"))
+    omnid_blind, dp_blind = (blind[(model, TASK0, "fewshot_a")] for model in ("omnid_long", "diffusion_long"))
+    if m := claim(text, NEW_CAMERA_SENTENCE, errors):
+        stated = [int(m[i]) for i in (1, 2, 3, 4, 6, 7)]
+        truth = [*astuple(omnid)[:2], *astuple(dp)[:2], *astuple(omnid_blind)[:2]]
+        if stated != truth:
+            errors.append(f"headline: new camera, 1000 steps: stated {stated}, the summaries give {truth}")
+        errors += p_errors("headline: new camera OmniD - DP p", m[5], fisher_exact(*truth[:4]))
+        errors += p_errors("headline: new camera OmniD - blind p", m[8], fisher_exact(*truth[:2], *truth[4:]))
+        if not above(omnid, omnid_blind):
+            errors.append("headline: new camera, OmniD 1000 steps is not above its blind control")
+        if above(dp, dp_blind):
+            errors.append("headline: new camera, DP 1000 steps is above its blind control")
+    if m := claim(text, ZERO_SHOT_SENTENCE, errors):
+        stated = [int(x) for x in m.groups()]
+        truth = [
+            n
+            for model in ("omnid_zero_shot", "diffusion_zero_shot")
+            for n in astuple(cells[(model, TASK0, "fewshot_a")])[:2]
+        ]
+        if stated != truth:
+            errors.append(f"headline: zero-shot stated {stated}, the summaries give {truth}")
+    return errors
+
+
+def test_readme_new_camera_counts_match_the_test_summaries():
+    records = load(NEW_CAMERA_SUMMARIES)
+    readme = README.read_text()
+    assert new_camera_errors(readme, records) == []
+    for old, new in (
+        ("with 1000 steps OmniD 23/60", "with 1000 steps OmniD 24/60"),
+        ("OmniD above its blind control (11/60", "OmniD above its blind control (10/60"),
+        ("zero-shot OmniD 0/60, DP 1/60", "zero-shot OmniD 1/60, DP 1/60"),
+    ):
+        edited = readme.replace(old, new)
+        assert edited != readme and new_camera_errors(edited, records) != []
+
+
 CALIBRATION_DRAWS_SUMMARY = "calibration_draws_cpu2.json"
 """The many-draw calibration curve: docs/results.md's "Robustness" rebuild command reads it."""
 MANY_DRAWS = r"over (\w+) draws a level (\d+), (\d+) and (\d+) of (\d+) at (\d+), (\d+) and (\d+) cm"
@@ -470,7 +524,8 @@ def test_rebuild_commands_name_the_committed_summaries():
     """The results page's rebuild commands (the only places it writes ``docs/results/``: its links are
     relative) pool the files this test checks, and they exist."""
     named = set(re.findall(r"docs/results/([\w.-]+\.json)", RESULTS_PAGE.read_text()))
-    assert set(HEADLINE_SUMMARIES) | set(FEWSHOT_SUMMARIES) | {SIX_TASKS_SUMMARY} <= named
+    committed = {*HEADLINE_SUMMARIES, *FEWSHOT_SUMMARIES, *NEW_CAMERA_SUMMARIES, SIX_TASKS_SUMMARY}
+    assert committed <= named
     assert [name for name in named if not (SUMMARIES / name).is_file()] == []
 
 
