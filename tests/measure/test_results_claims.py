@@ -326,7 +326,7 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     for old, new in (
         ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
         ("on `add_condiment` none", "on `select_apple` none"),  # OmniD, DP and ACT are above theirs there
-        ("OmniD 38/90 vs DP 28/90", "OmniD 38/90 vs DP 27/90"),
+        ("OmniD 43/120 vs DP 32/120", "OmniD 43/120 vs DP 31/120"),
         ("(p = 0.13), ACT", "(p = 0.03), ACT"),
     ):
         edited = readme.replace(old, new)
