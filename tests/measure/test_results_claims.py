@@ -288,15 +288,14 @@ Mantel-Haenszel p."""
 def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
     """The headline's six-task counts against the campaign's summary."""
     errors: list[str] = []
-    if m := claim(" ".join(headline_section(readme).split()), SIX_TASK_SENTENCE, errors):
+    text = " ".join(headline_section(readme).split())
+    cells, blind = collect(records), collect(records, "blind")
+    if m := claim(text, SIX_TASK_SENTENCE, errors):
         task, stated = m[1], [int(x) for x in m.groups()[1:]]
-        cells = collect(records)
         truth = [n for model in SIX_TASK_METHODS for n in astuple(cells[(model, task, "id")])[:2]]
         if stated != truth:
             errors.append(f"headline: six tasks, {task}: stated {stated}, the summary gives {truth}")
-    text = " ".join(headline_section(readme).split())
     if m := claim(text, SIX_TASK_POOLED, errors):
-        cells = collect(records)
         tasks = sorted({t for model, t, setting in cells if setting == "id" and model == "omnid"})
         pooled = [
             sum(astuple(cells[(model, t, "id")])[i] for t in tasks)
@@ -311,8 +310,8 @@ def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
             for t in tasks
         ]
         errors += p_errors("headline: six tasks pooled p", m[6], mantel_haenszel(strata))
-    for task in re.findall(r"on `(\w+)` none is above its blind control", text):
-        cells, blind = collect(records), collect(records, "blind")
+    named = re.findall(r"on (`\w+`(?:(?:, | and )`\w+`)*) none is above its blind control", text)
+    for task in (task for tasks in named for task in re.findall(r"`(\w+)`", tasks)):
         for model in SIX_TASK_METHODS:
             if above(cells[(model, task, "id")], blind[(model, task, "id")]):
                 errors.append(f"headline: on {task} {model} is above its blind control")
@@ -325,7 +324,8 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     assert six_task_errors(readme, records) == []
     for old, new in (
         ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
-        ("on `add_condiment` none", "on `select_apple` none"),  # OmniD, DP and ACT are above theirs there
+        ("on `add_condiment`,", "on `select_apple`,"),  # OmniD, DP and ACT are above theirs there
+        ("and `get_coffee` none", "and `select_apple` none"),  # the list's last task is checked too
         ("OmniD 43/120 vs DP 32/120", "OmniD 43/120 vs DP 31/120"),
         ("(p = 0.13), ACT", "(p = 0.03), ACT"),
     ):
