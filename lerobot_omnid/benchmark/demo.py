@@ -41,6 +41,7 @@ from lerobot_omnid.measure.engine import (
     Run,
     code_commit,
     describe_plan,
+    evaluations,
     execute,
     plan,
     read_stamp,
@@ -49,7 +50,6 @@ from lerobot_omnid.measure.report import short_commit
 from lerobot_omnid.measure.results import (
     EvalRecord,
     RunSummary,
-    read_eval_info,
     read_run_summary,
     write_run_summary,
 )
@@ -165,22 +165,11 @@ def summarise(runs: list[Run], out: Path, profile_name: str, commit: str | None 
     def relative(cmd: Sequence[str]) -> str:
         return shlex.join(cmd).replace(f"{out}/", "").replace(str(commands.BIN) + "/", "")
 
-    evaluations = []
-    for run in runs:
-        if run.kind != "eval":
-            continue
-        name = run.name.removeprefix("eval_")
-        setting, control = ("id", "blind") if name == BLIND else (name, "")
-        successes, episodes = read_eval_info(run.output / "eval_info.json")
-        source = f"{run.output.relative_to(out)}/eval_info.json"
-        commit_of_run = stamps[run.name].get("commit")
-        key = ("omnid", TASK, setting)
-        evaluations.append(EvalRecord(key, control, None, None, successes, episodes, source, commit_of_run))
     stages = [
         {"name": run.name, "seconds": stamps[run.name].get("seconds"), "command": relative(run.cmd)}
         for run in runs
     ]
-    return RunSummary(PROTOCOL, {"profile": profile_name}, evaluations, {"stages": stages}, commit)
+    return RunSummary(PROTOCOL, {"profile": profile_name}, evaluations(runs), {"stages": stages}, commit)
 
 
 def evaluation_name(record: EvalRecord) -> str:
@@ -259,7 +248,8 @@ def plan_runs(
             batch_size=min(EVAL_BATCH_SIZE, profile.eval_episodes),
         )
         needs = ("train", "blind_calibration") if name == BLIND else ("train",)
-        runs.append(Run(f"eval_{name}", "eval", tuple(cmd), out / f"eval_{name}", needs))
+        cell = {"result": ("omnid", TASK, layout), "control": "blind" if name == BLIND else ""}
+        runs.append(Run(f"eval_{name}", "eval", tuple(cmd), out / f"eval_{name}", needs, **cell))
     return plan(runs, out)
 
 

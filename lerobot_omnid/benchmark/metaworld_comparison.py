@@ -40,21 +40,18 @@ from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
     code_commit,
-    is_done,
+    evaluations,
     plan,
     report_from_summary,
     run_protocol,
-    stamp_commit,
 )
-from lerobot_omnid.measure.report import write_markdown
+from lerobot_omnid.measure.report import format_counts, write_markdown
 from lerobot_omnid.measure.results import (
     SUMMARY,
-    EvalRecord,
     RunSummary,
-    read_eval_info,
     write_run_summary,
 )
-from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
+from lerobot_omnid.measure.stats import fisher_exact
 
 TASKS = ("assembly-v3", "disassemble-v3", "stick-push-v3", "push-v3", "pick-place-wall-v3")
 PROTOCOL = "metaworld_comparison"
@@ -153,25 +150,14 @@ def protocol(out: Path, tasks: Sequence[str], models: Sequence[str]) -> list[Run
                 for blind in (False, True):
                     folder = eval_dir(out, model, task, seed, blind)
                     cmd = tuple(evaluate(out, model, task, seed, blind))
-                    runs.append(Run(str(folder.relative_to(out)), "eval", cmd, folder, (name,)))
+                    cell = {"result": (model, task, "id"), "seed": seed, "train_seed": TRAIN_SEED}
+                    cell["control"] = "blind" if blind else ""
+                    runs.append(Run(str(folder.relative_to(out)), "eval", cmd, folder, (name,), **cell))
     return plan(runs, out)
 
 
-def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunSummary:
+def summarise(runs: Sequence[Run], commit: str | None = None) -> RunSummary:
     """Every finished evaluation of this plan: model, task, control, env-seed range, counts, commit."""
-    evaluations = []
-    for run in runs:
-        if run.kind != "eval" or not is_done(run):
-            continue
-        blind, model, task, seed = run.output.relative_to(out).parts
-        counts = read_eval_info(run.output / "eval_info.json")
-        control = "blind" if blind == "eval_blind" else ""
-        source = str(run.output.relative_to(out))
-        first = int(seed.removeprefix("seed"))
-        record = EvalRecord(
-            (model, task, "id"), control, TRAIN_SEED, first, *counts, source, stamp_commit(run)
-        )
-        evaluations.append(record)
     settings = {
         "steps": STEPS,
         "demonstrations": DEMONSTRATIONS,
@@ -179,14 +165,7 @@ def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunS
         "episode_length": EPISODE_LENGTH,
         "test_seeds": list(TEST_SEEDS),
     }
-    return RunSummary(PROTOCOL, settings, evaluations, {"published": PUBLISHED}, commit)
-
-
-def count_text(counts: tuple[int, int] | None) -> str:
-    if counts is None:
-        return "-"
-    est = wilson_interval(*counts)
-    return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
+    return RunSummary(PROTOCOL, settings, evaluations(runs), {"published": PUBLISHED}, commit)
 
 
 def write_report(summary: RunSummary, path: Path) -> None:
@@ -215,13 +194,15 @@ def write_report(summary: RunSummary, path: Path) -> None:
         "|---|" + "---|" * (2 * len(models) + 2),
     ]
     for task in tasks:
-        row = [f"{count_text(pooled(m, task))} | {count_text(pooled(m, task, 'blind'))}" for m in models]
+        row = [
+            f"{format_counts(pooled(m, task))} | {format_counts(pooled(m, task, 'blind'))}" for m in models
+        ]
         dp3, dp = published[task]
         lines.append(f"| {task} | " + " | ".join(row) + f" | {dp3} % | {dp} % |")
     lines += ["", "| task | env seeds | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
     for task in tasks:
         for seed in settings["test_seeds"]:
-            row = [count_text(cells.get((m, task, ""), {}).get(seed)) for m in models]
+            row = [format_counts(cells.get((m, task, ""), {}).get(seed)) for m in models]
             lines.append(f"| {task} | from {seed} | " + " | ".join(row) + " |")
     lines += ["", "| task | comparison | Fisher p |", "|---|---|---|"]
     for task in tasks:
@@ -253,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     commit = code_commit()
 
     def write_outputs() -> None:
-        summary = summarise(out, runs, commit)
+        summary = summarise(runs, commit)
         out.mkdir(parents=True, exist_ok=True)
         write_run_summary(out / SUMMARY, summary)
         write_report(summary, out / "report.md")

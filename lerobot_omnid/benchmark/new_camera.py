@@ -62,18 +62,15 @@ from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
     code_commit,
-    is_done,
+    evaluations,
     plan,
     report_from_summary,
     run_protocol,
-    stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import (
     SUMMARY,
-    EvalRecord,
     RunSummary,
-    read_eval_info,
     write_run_summary,
 )
 from lerobot_omnid.measure.stats import wilson_interval
@@ -178,15 +175,16 @@ def finetune(out: Path, hypothesis: str) -> list[str]:
     )
 
 
-def evaluate(out: Path, checkpoint: Path, model: str) -> list[str]:
-    """Camera A only, ID, the validation seeds; its calibration read from the env's every frame."""
+def evaluation(out: Path, checkpoint: Path, model: str, trained: str) -> Run:
+    """Camera A only, ID, the validation seeds; its calibration read from the env's every frame.
+    ``trained``: the name of the run that makes ``checkpoint``."""
     extra = [
         f"--env.episode_length={MINI.episode_length}",
         "--env.per_frame_calibration=true",
         "--policy.cameras=" + commands.json_list(CAMERA_A),
         "--policy.frame_calibration=" + commands.json_list([image_key(c) for c in CAMERA_A]),
     ]
-    return commands.eval_command(
+    cmd = commands.eval_command(
         checkpoint,
         validation_dir(out, model),
         TASK0,
@@ -199,6 +197,16 @@ def evaluate(out: Path, checkpoint: Path, model: str) -> list[str]:
         extra=extra,
         batch_size=min(MINI.eval_batch_size, VALIDATION_EPISODES),
     )
+    return Run(
+        f"validation/{model}",
+        "eval",
+        tuple(cmd),
+        validation_dir(out, model),
+        (trained,),
+        result=(model, TASK0, "validation"),
+        seed=VALIDATION_SEED,
+        train_seed=TRAIN_SEED,
+    )
 
 
 def protocol(out: Path) -> list[Run]:
@@ -210,11 +218,7 @@ def protocol(out: Path) -> list[Run]:
             str(folder.relative_to(out)), "train", tuple(pretrain(out, name)), folder, (runs[0].name,)
         )
         runs.append(trained)
-        model = f"zero_shot_{name}"
-        cmd = evaluate(out, pretrained_dir(out, name) / CHECKPOINT, model)
-        runs.append(
-            Run(f"validation/{model}", "eval", tuple(cmd), validation_dir(out, model), (trained.name,))
-        )
+        runs.append(evaluation(out, folder / CHECKPOINT, f"zero_shot_{name}", trained.name))
     for hypothesis, recipe in HYPOTHESES.items():
         name = str(finetuned_dir(out, hypothesis).relative_to(out))
         data = f"merge/{REPLAY_DATA}" if recipe.replay else runs[1].name
@@ -222,10 +226,7 @@ def protocol(out: Path) -> list[Run]:
         runs.append(
             Run(name, "train", tuple(finetune(out, hypothesis)), finetuned_dir(out, hypothesis), needs)
         )
-        cmd = evaluate(out, finetuned_dir(out, hypothesis) / CHECKPOINT, hypothesis)
-        runs.append(
-            Run(f"validation/{hypothesis}", "eval", tuple(cmd), validation_dir(out, hypothesis), (name,))
-        )
+        runs.append(evaluation(out, finetuned_dir(out, hypothesis) / CHECKPOINT, hypothesis, name))
     return plan(runs, out)
 
 
@@ -237,21 +238,11 @@ def select(results: dict[str, tuple[int, int]]) -> str:
     return min(close, key=lambda h: HYPOTHESES[h].steps)
 
 
-def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunSummary:
+def summarise(runs: Sequence[Run], commit: str | None = None) -> RunSummary:
     """Each model's validation counts and the commit that made them (of the runs done for this plan), and
     the selection once every hypothesis is validated."""
-    done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    evaluations = []
-    for model in [f"zero_shot_{name}" for name in PRETRAINED] + list(HYPOTHESES):
-        if (folder := validation_dir(out, model)) in done:
-            counts = read_eval_info(folder / "eval_info.json")
-            source = str(folder.relative_to(out))
-            key = (model, TASK0, "validation")
-            commit_of_run = stamp_commit(done[folder])
-            evaluations.append(
-                EvalRecord(key, "", TRAIN_SEED, VALIDATION_SEED, *counts, source, commit_of_run)
-            )
-    validated = {r.key[0]: (r.successes, r.episodes) for r in evaluations if r.key[0] in HYPOTHESES}
+    records = evaluations(runs)
+    validated = {r.key[0]: (r.successes, r.episodes) for r in records if r.key[0] in HYPOTHESES}
     settings = {
         "task": TASK0,
         "validation_seed": VALIDATION_SEED,
@@ -259,7 +250,7 @@ def summarise(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunS
         "hypotheses": {h: dataclasses.asdict(recipe) for h, recipe in HYPOTHESES.items()},
     }
     selected = select(validated) if len(validated) == len(HYPOTHESES) else None
-    return RunSummary(PROTOCOL, settings, evaluations, {"selected": selected}, commit)
+    return RunSummary(PROTOCOL, settings, records, {"selected": selected}, commit)
 
 
 def write_report(summary: RunSummary, path: Path) -> None:
@@ -311,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
     results = results_dir(out)
 
     def write_outputs() -> None:
-        summary = summarise(out, runs, commit)
+        summary = summarise(runs, commit)
         results.mkdir(parents=True, exist_ok=True)
         write_run_summary(results / SUMMARY, summary)
         selected = summary.results["selected"]

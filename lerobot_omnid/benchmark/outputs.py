@@ -57,7 +57,7 @@ from lerobot_omnid.benchmark.plan import (
 from lerobot_omnid.benchmark.variant_selection import selection_lines
 from lerobot_omnid.measure import across_tasks, charts, report, results
 from lerobot_omnid.measure.across_tasks import ALPHA, NOT_ABOVE_BLIND
-from lerobot_omnid.measure.engine import Run, is_done, portable_command, stamp_commit
+from lerobot_omnid.measure.engine import Run, eval_entry, is_done
 from lerobot_omnid.measure.report import MISSING
 from lerobot_omnid.measure.stats import fisher_exact, rate_difference
 
@@ -186,20 +186,6 @@ def settings_markdown(p: BenchmarkProfile, tasks: tuple[str, ...]) -> list[str]:
     }
     lines += [""] + [f"- {notes[m]}" for m in p.methods if m in notes]
     return lines
-
-
-def eval_entry(run: Run) -> results.EvalEntry:
-    """A finished evaluation run as the cell it fills, with the commit of its stamp."""
-    return results.EvalEntry(
-        run.result,
-        run.seed,
-        run.output / "eval_info.json",
-        run.train_seed,
-        run.control,
-        portable_command(run.cmd),
-        stamp_commit(run),
-        run.fingerprint,
-    )
 
 
 def ordered_models(p: BenchmarkProfile, records: Sequence[results.EvalRecord]) -> tuple[str, ...]:

@@ -29,8 +29,8 @@ and ``<out>/summary.json``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS
@@ -53,21 +53,20 @@ from lerobot_omnid.measure.engine import (
     Run,
     code_commit,
     describe_plan,
+    evaluations,
     execute,
     is_done,
     plan,
     report_from_summary,
 )
-from lerobot_omnid.measure.report import write_markdown
+from lerobot_omnid.measure.report import MISSING, format_counts, write_markdown
 from lerobot_omnid.measure.results import (
     SUMMARY,
-    EvalRecord,
     RunSummary,
-    read_eval_info,
     tags_of,
     write_run_summary,
 )
-from lerobot_omnid.measure.stats import fisher_exact, wilson_interval
+from lerobot_omnid.measure.stats import fisher_exact
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 PROFILE = PROFILES["mini"]
@@ -114,8 +113,9 @@ def control_file(out: Path, readout: str) -> Path:
     return out / "controls" / readout / BLIND_FILE
 
 
-def evaluate(out: Path, phase: str, readout: str, setting: str, device: str, control: str = "") -> list[str]:
-    """``lerobot-eval`` of one readout: ``phase`` "validation" (ID, validation seeds) or "test"."""
+def evaluation(out: Path, phase: str, readout: str, setting: str, device: str, control: str = "") -> Run:
+    """``lerobot-eval`` of one readout, the cell it fills tagged with its ``phase``: "validation" (ID,
+    validation seeds) or "test"."""
     seed, episodes = (
         (VALIDATION_SEED, VALIDATION_EPISODES) if phase == "validation" else (TEST_SEED, TEST_EPISODES)
     )
@@ -125,9 +125,10 @@ def evaluate(out: Path, phase: str, readout: str, setting: str, device: str, con
         extra += [
             flag for flag, _ in control_flags("omnid", control, TRAIN_CAMERAS, control_file(out, readout))
         ]
-    return commands.eval_command(
+    folder = eval_dir(out, phase, readout, setting, control)
+    cmd = commands.eval_command(
         checkpoint(out, readout),
-        eval_dir(out, phase, readout, setting, control),
+        folder,
         TASK0,
         layout,
         TRAIN_CAMERAS,
@@ -138,6 +139,20 @@ def evaluate(out: Path, phase: str, readout: str, setting: str, device: str, con
         seed=seed,
         extra=extra,
         batch_size=min(PROFILE.eval_batch_size, episodes),
+    )
+    name = f"eval/validation/{readout}" if phase == "validation" else f"eval/test/{readout}/{folder.name}"
+    needs = (f"train/{readout}", *((f"calibration/{readout}",) if control else ()))
+    return Run(
+        name,
+        "eval",
+        tuple(cmd),
+        folder,
+        needs,
+        result=(readout, TASK0, setting),
+        seed=seed,
+        train_seed=TRAIN_SEED,
+        control=control,
+        tags=tags_of({"phase": phase}),
     )
 
 
@@ -184,13 +199,7 @@ def validation_runs(out: Path, data: Path, device: str, record_data: bool) -> li
                 out / "offline" / readout,
                 (trained, f"record/{HELDOUT_DATA}"),
             ),
-            Run(
-                f"eval/validation/{readout}",
-                "eval",
-                tuple(evaluate(out, "validation", readout, "id", device)),
-                eval_dir(out, "validation", readout, "id"),
-                (trained,),
-            ),
+            evaluation(out, "validation", readout, "id", device),
         ]
     return runs
 
@@ -205,27 +214,8 @@ def test_runs(out: Path, selected: str, device: str) -> list[Run]:
             checkpoint(out, readout), "blind", control_file(out, readout)
         )
         runs.append(Run(blind, "calibration", tuple(cmd), control_file(out, readout), (trained,)))
-        for setting in TEST_SETTINGS:
-            cmd = evaluate(out, "test", readout, setting, device)
-            runs.append(
-                Run(
-                    f"eval/test/{readout}/{setting}",
-                    "eval",
-                    tuple(cmd),
-                    eval_dir(out, "test", readout, setting),
-                    (trained,),
-                )
-            )
-        cmd = evaluate(out, "test", readout, "id", device, "blind")
-        runs.append(
-            Run(
-                f"eval/test/{readout}/id_blind",
-                "eval",
-                tuple(cmd),
-                eval_dir(out, "test", readout, "id", "blind"),
-                (trained, blind),
-            )
-        )
+        runs += [evaluation(out, "test", readout, setting, device) for setting in TEST_SETTINGS]
+        runs.append(evaluation(out, "test", readout, "id", device, "blind"))
     return runs
 
 
@@ -235,23 +225,25 @@ def protocol(out: Path, data: Path, device: str, record_data: bool, selected: st
     return plan([*runs, *(test_runs(out, selected, device) if selected else ())], out)
 
 
-def validation_results(out: Path, done: set[Path]) -> dict[str, dict]:
-    """Per readout whose validation runs are ``done`` (their outputs): successes, episodes, open-loop
+def open_loop_errors(runs: Sequence[Run]) -> dict[str, dict[str, float]]:
+    """Per readout whose open-loop run of ``runs`` is done: its TCP (cm) and gripper errors."""
+    found = {}
+    for run in runs:
+        if run.kind == "offline" and is_done(run):
+            errors = json.loads((run.output / OFFLINE_OUTPUT).read_text())
+            found[run.output.name] = {"position_cm": errors["position_cm"], "gripper": errors["gripper"]}
+    return found
+
+
+def validation_results(runs: Sequence[Run]) -> dict[str, dict]:
+    """Per readout whose validation runs of ``runs`` are both done: successes, episodes, open-loop
     errors."""
-    results = {}
-    for readout in PLANE_READOUTS:
-        info = eval_dir(out, "validation", readout, "id") / "eval_info.json"
-        errors = out / "offline" / readout / OFFLINE_OUTPUT
-        if info.parent in done and errors.parent in done:
-            successes, episodes = read_eval_info(info)
-            offline_result = json.loads(errors.read_text())
-            results[readout] = {
-                "successes": successes,
-                "episodes": episodes,
-                "position_cm": offline_result["position_cm"],
-                "gripper": offline_result["gripper"],
-            }
-    return results
+    errors = open_loop_errors(runs)
+    return {
+        r.key[0]: {"successes": r.successes, "episodes": r.episodes, **errors[r.key[0]]}
+        for r in evaluations(runs)
+        if r.tag("phase") == "validation" and r.key[0] in errors
+    }
 
 
 def select(results: dict[str, dict]) -> str:
@@ -264,34 +256,8 @@ def select(results: dict[str, dict]) -> str:
     return min(close, key=lambda name: results[name]["position_cm"])
 
 
-def count_text(counts: list[int] | None) -> str:
-    """``s/n (low-high %)`` with the Wilson interval, or ``-`` for a cell not evaluated."""
-    if counts is None:
-        return "-"
-    est = wilson_interval(*counts)
-    return f"{counts[0]}/{counts[1]} ({100 * est.low:.1f}-{100 * est.high:.1f} %)"
-
-
-def report(out: Path, done: set[Path], commit: str | None = None) -> RunSummary:
-    """``report.md`` and ``summary.json`` from the runs ``done`` (their outputs); returns the summary."""
-    evaluations, open_loop = [], {}
-    for readout, result in validation_results(out, done).items():
-        source = str(eval_dir(out, "validation", readout, "id").relative_to(out))
-        counts = (result["successes"], result["episodes"])
-        record = EvalRecord((readout, TASK0, "id"), "", TRAIN_SEED, VALIDATION_SEED, *counts, source)
-        evaluations.append(dataclasses.replace(record, tags=tags_of({"phase": "validation"})))
-        open_loop[readout] = {"position_cm": result["position_cm"], "gripper": result["gripper"]}
-    for readout in PLANE_READOUTS:
-        for setting in (*TEST_SETTINGS, "id_blind"):
-            folder = eval_dir(out, "test", readout, setting)
-            if folder in done:
-                counts = read_eval_info(folder / "eval_info.json")
-                key = (readout, TASK0, setting.removesuffix("_blind"))
-                control = "blind" if setting.endswith("_blind") else ""
-                record = EvalRecord(
-                    key, control, TRAIN_SEED, TEST_SEED, *counts, str(folder.relative_to(out))
-                )
-                evaluations.append(dataclasses.replace(record, tags=tags_of({"phase": "test"})))
+def report(out: Path, runs: Sequence[Run], commit: str | None = None) -> RunSummary:
+    """``report.md`` and ``summary.json`` from the runs of the plan that are done; returns the summary."""
     settings = {
         "task": TASK0,
         "steps": PROFILE.steps,
@@ -301,8 +267,8 @@ def report(out: Path, done: set[Path], commit: str | None = None) -> RunSummary:
         "test_seed": TEST_SEED,
     }
     selection = json.loads((out / SELECTION_FILE).read_text()) if (out / SELECTION_FILE).is_file() else None
-    results = {"open_loop": open_loop, "selection": selection}
-    summary = RunSummary(PROTOCOL, settings, evaluations, results, commit)
+    results = {"open_loop": open_loop_errors(runs), "selection": selection}
+    summary = RunSummary(PROTOCOL, settings, evaluations(runs), results, commit)
     write_run_summary(out / SUMMARY, summary)
     write_report(summary, out / "report.md")
     return summary
@@ -312,14 +278,15 @@ def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md`` (validation table with the selection, test table with Fisher tests) from a
     ``summary.json``, this run's or a committed one."""
     selection, open_loop = summary.results["selection"], summary.results["open_loop"]
-    test: dict[str, dict[str, list[int]]] = {}
-    validation: dict[str, list[int]] = {}
+    test: dict[str, dict[str, tuple[int, int]]] = {}
+    validation: dict[str, tuple[int, int]] = {}
     for r in summary.evaluations:
         if r.tag("phase") == "validation":
-            validation[r.key[0]] = [r.successes, r.episodes]
+            validation[r.key[0]] = (r.successes, r.episodes)
         else:
             setting = r.key[2] + ("_blind" if r.control == "blind" else "")
-            test.setdefault(r.key[0], {})[setting] = [r.successes, r.episodes]
+            test.setdefault(r.key[0], {})[setting] = (r.successes, r.episodes)
+    test = {r: test[r] for r in PLANE_READOUTS if r in test}
     settings = summary.settings
     lines = [f"# Choosing the plane readout ({settings['task']}, mini sizes)", ""]
     seeds = f"env seeds {settings['validation_seed']}-{settings['validation_seed'] + VALIDATION_EPISODES - 1}"
@@ -333,11 +300,11 @@ def write_report(summary: RunSummary, path: Path) -> None:
     ]
     for name, counts in validation.items():
         chosen = "**yes**" if selection and selection["selected"] == name else ""
-        errors = open_loop[name]
-        lines.append(
-            f"| {name} | {count_text(counts)} | {errors['position_cm']:.2f} | {errors['gripper']:.3f} | "
-            f"{chosen} |"
+        errors = open_loop.get(name)
+        position, gripper = (
+            (f"{errors['position_cm']:.2f}", f"{errors['gripper']:.3f}") if errors else (MISSING, MISSING)
         )
+        lines.append(f"| {name} | {format_counts(counts)} | {position} | {gripper} | {chosen} |")
     if test and selection:
         first = settings["test_seed"]
         lines += [
@@ -350,11 +317,11 @@ def write_report(summary: RunSummary, path: Path) -> None:
         for setting in (*TEST_SETTINGS, "id_blind"):
             cells = [test[r].get(setting) for r in test]
             p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 and all(cells) else ""
-            lines.append(f"| {setting} | " + " | ".join(map(count_text, cells)) + f" | {p} |")
+            lines.append(f"| {setting} | " + " | ".join(map(format_counts, cells)) + f" | {p} |")
         if all(o in test[r] for r in test for o in BACKGROUND_OODS):
-            cells = [[sum(test[r][o][i] for o in BACKGROUND_OODS) for i in (0, 1)] for r in test]
+            cells = [tuple(sum(test[r][o][i] for o in BACKGROUND_OODS) for i in (0, 1)) for r in test]
             p = f"{fisher_exact(*cells[0], *cells[1]):.3g}" if len(cells) == 2 else ""
-            lines.append("| unseen tables, pooled | " + " | ".join(map(count_text, cells)) + f" | {p} |")
+            lines.append("| unseen tables, pooled | " + " | ".join(map(format_counts, cells)) + f" | {p} |")
     write_markdown(lines, path)
 
 
@@ -386,7 +353,7 @@ def main(argv: list[str] | None = None) -> None:
         validation = validation_runs(out, data, args.device, not args.data)
         parser.error(
             f"--test: expected every readout validated ({len(PLANE_READOUTS)}) and selected, got "
-            f"{len(validation_results(out, {r.output for r in plan(validation, out) if is_done(r)}))}"
+            f"{len(validation_results(plan(validation, out)))}"
         )
     runs = protocol(out, data, args.device, not args.data, selected if args.test else None)
     if args.dry_run:
@@ -395,13 +362,13 @@ def main(argv: list[str] | None = None) -> None:
     commit = code_commit()
     if not args.report_only:
         execute(runs, out, commit=commit, desc="readout selection", stop_on_failure=True)
-        results = validation_results(out, {r.output for r in runs if is_done(r)})
+        results = validation_results(runs)
         if selected is None and len(results) == len(PLANE_READOUTS):
             selection = {"selected": select(results), "rule": select.__doc__, "commit": commit}
             selection_file.write_text(json.dumps(selection, indent=2) + "\n")
     # The test's finished runs are reported whether or not this call asked for them.
     reported = protocol(out, data, args.device, not args.data, selected or read_selection(selection_file))
-    report(out, {r.output for r in reported if is_done(r)}, commit)
+    report(out, reported, commit)
 
 
 def read_selection(path: Path) -> str | None:

@@ -26,7 +26,6 @@ Fisher tests of each pair, the code commit of each evaluation, from its stamp) a
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
 from gym_omnid import TRAIN_CAMERAS, WRIST_CAMERA
@@ -41,18 +40,15 @@ from lerobot_omnid.measure.engine import (
     Run,
     code_commit,
     describe_plan,
+    evaluations,
     execute,
-    is_done,
     plan,
     report_from_summary,
-    stamp_commit,
 )
 from lerobot_omnid.measure.report import write_markdown
 from lerobot_omnid.measure.results import (
     SUMMARY,
-    EvalRecord,
     RunSummary,
-    read_eval_info,
     tags_of,
     write_run_summary,
 )
@@ -151,29 +147,19 @@ def cells() -> list[tuple[str, str, str, bool]]:
 
 
 def report(
-    out: Path, episodes: int, checkpoints: dict[str, Path], runs: list[Run], commit: str | None = None
+    out: Path, episodes: int, given: dict[str, Path], runs: list[Run], commit: str | None = None
 ) -> None:
-    """``report.md`` and ``summary.json`` from the evaluations of ``runs`` done for this plan."""
-    done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    evaluations = []
-    for model, rig, layout, blind in cells():
-        folder = eval_dir(out, model, rig, layout, blind)
-        if folder in done:
-            s, n = read_eval_info(folder / "eval_info.json")
-            control, source = "blind" if blind else "", str(folder.relative_to(out))
-            record = EvalRecord((model, TASK, layout), control, TRAIN_SEED, EVAL_SEED, s, n, source)
-            evaluations.append(
-                dataclasses.replace(record, commit=stamp_commit(done[folder]), tags=tags_of({"rig": rig}))
-            )
+    """``report.md`` and ``summary.json`` from the evaluations of ``runs`` done for this plan; ``given``:
+    the models whose checkpoints were given, not trained here."""
     settings = {
         "task": TASK,
         "episodes_per_cell": episodes,
         "eval_seed": EVAL_SEED,
         "train_seed": TRAIN_SEED,
         "steps": PROFILE.steps,
-        "checkpoints": {m: "given" if m in checkpoints else "trained here" for m in MODELS},
+        "checkpoints": {m: "given" if m in given else "trained here" for m in MODELS},
     }
-    summary = RunSummary(PROTOCOL, settings, evaluations, {}, commit)
+    summary = RunSummary(PROTOCOL, settings, evaluations(runs), {}, commit)
     write_run_summary(out / SUMMARY, summary)
     write_report(summary, out / "report.md")
 
@@ -235,7 +221,9 @@ def protocol(out: Path, checkpoints: dict[str, Path], given: dict[str, Path], ep
         cmd = evaluate(out, m, checkpoints[m], r, lay, episodes, b)
         needs = () if m in given else (f"train/{m}",)
         inputs = (given[m] / "model.safetensors", given[m] / "config.json") if m in given else ()
-        runs.append(Run(f"eval/{m}/{folder.name}", "eval", tuple(cmd), folder, needs, inputs=inputs))
+        cell = {"result": (m, TASK, lay), "seed": EVAL_SEED, "train_seed": TRAIN_SEED}
+        cell |= {"control": "blind" if b else "", "tags": tags_of({"rig": r})}
+        runs.append(Run(f"eval/{m}/{folder.name}", "eval", tuple(cmd), folder, needs, inputs=inputs, **cell))
     return plan(runs, out)
 
 

@@ -51,7 +51,6 @@ from lerobot_omnid.benchmark.robustness_plan import (
     calibration_file,
     camera_offsets,
     checkpoint_from_config,
-    eval_dir,
     perturbed_calibrations,
     plan_cells,
 )
@@ -70,13 +69,11 @@ from lerobot_omnid.benchmark.robustness_report import (
 from lerobot_omnid.calibration.rig_file import save_calibration_file
 from lerobot_omnid.cli import csv_of, int_at_least
 from lerobot_omnid.measure import engine
-from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, execute, is_done
+from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, evaluations, execute, is_done
 from lerobot_omnid.measure.results import (
     SUMMARY,
     EvalRecord,
     RunSummary,
-    read_eval_info,
-    tags_of,
     write_run_summary,
 )
 
@@ -243,19 +240,15 @@ def write_calibration_files(
 
 
 def cell_counts(
-    checkpoint: Checkpoint, settings: RobustnessSettings, out: Path, done: set[Path]
+    checkpoint: Checkpoint, settings: RobustnessSettings, records: Sequence[EvalRecord]
 ) -> dict[Cell, dict[int, tuple[int, int]]]:
-    """(successes, episodes) per cell of ``checkpoint`` and eval seed, of the evaluations whose output
-    folders are ``done`` for this very plan (:func:`lerobot_omnid.measure.engine.is_done`)."""
-    counts = {}
-    for cell in plan_cells(checkpoint, settings):
-        found = {
-            k: read_eval_info(folder / "eval_info.json")
-            for k in settings.eval_seeds
-            if (folder := eval_dir(out, checkpoint, cell, k)) in done
-        }
-        if found:
-            counts[cell] = found
+    """(successes, episodes) per cell of ``checkpoint`` and eval seed, from the ``records`` of the
+    evaluations done for this very plan (:func:`lerobot_omnid.measure.engine.evaluations`)."""
+    cells = {cell.name: cell for cell in plan_cells(checkpoint, settings)}
+    counts: dict[Cell, dict[int, tuple[int, int]]] = {}
+    for r in records:
+        if r.key[0] == checkpoint.label:
+            counts.setdefault(cells[r.key[2]], {})[r.eval_seed] = (r.successes, r.episodes)
     return counts
 
 
@@ -291,19 +284,8 @@ def write_outputs(
     label. Every evaluation is a record (model: the checkpoint's label; setting: its cell's folder name,
     tags: condition, level, draw, camera); ``results`` holds each checkpoint's table rows, which the report
     is built from."""
-    done = {run.output for run in runs if is_done(run)}
-    rows, evaluations = {}, []
-    for c in checkpoints:
-        counts = cell_counts(c, settings, out, done)
-        rows[c.label] = table_rows(counts)
-        for cell, by_seed in counts.items():
-            tags = tags_of(dataclasses.asdict(cell))
-            for k, (successes, episodes) in by_seed.items():
-                source = str(eval_dir(out, c, cell, k).relative_to(out))
-                record = EvalRecord(
-                    (c.label, settings.task, cell.name), "", c.train_seed, k, successes, episodes, source
-                )
-                evaluations.append(dataclasses.replace(record, tags=tags))
+    records = evaluations(runs)
+    rows = {c.label: table_rows(cell_counts(c, settings, records)) for c in checkpoints}
     results = {
         "checkpoints": {
             c.label: {
@@ -314,7 +296,7 @@ def write_outputs(
             for c in checkpoints
         },
     }
-    summary = RunSummary(PROTOCOL, dataclasses.asdict(settings), evaluations, results, commit, [command])
+    summary = RunSummary(PROTOCOL, dataclasses.asdict(settings), records, results, commit, [command])
     write_run_summary(out / SUMMARY, summary)
     write_report(summary, rows, out)
     return rows

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ from lerobot_omnid.calibration.schema import CameraCalibration
 from lerobot_omnid.geometry import axis_angle_to_matrix, perturb_extrinsics, random_unit_vectors
 from lerobot_omnid.keys import image_key
 from lerobot_omnid.measure.engine import Run, plan
+from lerobot_omnid.measure.results import tags_of
 
 LEVELS = (0.0, 0.5, 1.0, 2.0, 4.0)
 """Perturbation levels: cm of translation and degrees of rotation together."""
@@ -306,6 +307,7 @@ def build_runs(checkpoints: Sequence[Checkpoint], settings: RobustnessSettings, 
                         result=result,
                         seed=k,
                         train_seed=checkpoint.train_seed,
+                        tags=tags_of(asdict(cell)),
                     )
                 )
     return plan(runs, out)

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from gym_omnid import TASKS, TRAIN_CAMERAS
@@ -44,24 +44,21 @@ from lerobot_omnid.measure.engine import (
     Run,
     code_commit,
     describe_plan,
+    evaluations,
     execute,
-    is_done,
     plan,
     report_from_summary,
     schedule,
-    stamp_commit,
 )
-from lerobot_omnid.measure.report import write_markdown
+from lerobot_omnid.measure.report import format_counts, write_markdown
 from lerobot_omnid.measure.results import (
     SUMMARY,
     EvalRecord,
     RunSummary,
-    read_eval_info,
     read_run_summary,
     tags_of,
     write_run_summary,
 )
-from lerobot_omnid.measure.stats import wilson_interval
 
 PROFILE = PROFILES["mini"]
 METHOD = "diffusion"
@@ -110,7 +107,9 @@ def task_runs(out: Path, task: str, budgets: Sequence[int]) -> list[Run]:
             extra=(f"--env.episode_length={PROFILE.episode_length}",),
             batch_size=min(PROFILE.eval_batch_size, VALIDATION_EPISODES),
         )
-        runs.append(Run(f"{output.relative_to(out)}", "eval", tuple(cmd), output, (name,)))
+        cell = {"result": (METHOD, task, "validation"), "seed": VALIDATION_SEED, "train_seed": TRAIN_SEED}
+        tags = tags_of({"steps": steps})
+        runs.append(Run(f"{output.relative_to(out)}", "eval", tuple(cmd), output, (name,), tags=tags, **cell))
     return runs
 
 
@@ -125,9 +124,18 @@ def size(counts: dict[int, tuple[int, int]]) -> int | str | None:
     return None
 
 
-Known = dict[str, dict[int, tuple[int, int, str | None]]]
-"""Validation (successes, episodes, commit) already measured, per task and budget: those of committed
-summaries (``--also``)."""
+Known = dict[tuple[str, int], EvalRecord]
+"""Validation records already measured, per (task, budget): those of committed summaries (``--also``)."""
+
+
+def validated(records: Iterable[EvalRecord]) -> dict[tuple[str, int], EvalRecord]:
+    """Validation records per (task, budget)."""
+    return {(r.key[1], int(r.tag("steps"))): r for r in records}
+
+
+def budget_counts(found: Known, task: str) -> dict[int, tuple[int, int]]:
+    """``task``'s validation (successes, episodes) per budget measured."""
+    return {steps: (r.successes, r.episodes) for (t, steps), r in found.items() if t == task}
 
 
 def protocol(out: Path, tasks: Sequence[str], known: Known | None = None) -> list[Run]:
@@ -135,7 +143,7 @@ def protocol(out: Path, tasks: Sequence[str], known: Known | None = None) -> lis
     previous one is validated (here or in ``known``) and below the threshold; a known budget is not run."""
     runs: list[Run] = []
     for task in tasks:
-        counts = {steps: c[:2] for steps, c in (known or {}).get(task, {}).items()}
+        counts = budget_counts(known or {}, task)
         todo: list[int] = []
         for steps in BUDGETS:
             if size(counts) != "pending":
@@ -143,53 +151,23 @@ def protocol(out: Path, tasks: Sequence[str], known: Known | None = None) -> lis
             if steps in counts:
                 continue
             todo.append(steps)
-            validated = next(
-                r
-                for r in plan(task_runs(out, task, todo), out)
-                if r.output == validation_dir(out, task, steps)
-            )
-            if not is_done(validated):
+            measured = budget_counts(validated(evaluations(plan(task_runs(out, task, todo), out))), task)
+            if steps not in measured:
                 break
-            counts[steps] = read_eval_info(validated.output / "eval_info.json")
+            counts[steps] = measured[steps]
         if todo:
             runs += task_runs(out, task, todo)
     return plan(runs, out)
 
 
 def summarise(
-    out: Path,
-    runs: Sequence[Run],
-    tasks: Sequence[str],
-    known: Known | None = None,
-    commit: str | None = None,
+    runs: Sequence[Run], tasks: Sequence[str], known: Known | None = None, commit: str | None = None
 ) -> RunSummary:
-    """Per task the validation counts of every budget done for this plan or ``known`` (a record each,
-    tagged with its steps, with the commit that measured it; known ones: as their summary says), and the
-    rule's budget (``results["budgets"]``)."""
-    done = {run.output: run for run in runs if run.kind == "eval" and is_done(run)}
-    evaluations, budgets = [], {}
-    for task in tasks:
-        given = (known or {}).get(task, {})
-        counts = {steps: c[:2] for steps, c in given.items()}
-        commits = {steps: c[2] for steps, c in given.items()}
-        for steps in BUDGETS:
-            if (folder := validation_dir(out, task, steps)) in done:
-                counts[steps] = read_eval_info(folder / "eval_info.json")
-                commits[steps] = stamp_commit(done[folder])
-        for steps in (b for b in BUDGETS if b in counts):
-            source = str(validation_dir(out, task, steps).relative_to(out))
-            record = EvalRecord(
-                (METHOD, task, "validation"),
-                "",
-                TRAIN_SEED,
-                VALIDATION_SEED,
-                *counts[steps],
-                source,
-                commits.get(steps),
-                tags=tags_of({"steps": steps}),
-            )
-            evaluations.append(record)
-        budgets[task] = size(counts)
+    """Per task the validation record of every budget done for this plan or ``known`` (tagged with its
+    steps, with the commit that measured it), and the rule's budget (``results["budgets"]``)."""
+    found = {**(known or {}), **validated(evaluations(runs))}
+    records = [found[task, steps] for task in tasks for steps in BUDGETS if (task, steps) in found]
+    budgets = {task: size(budget_counts(found, task)) for task in tasks}
     settings = {
         "method": METHOD,
         "budgets": list(BUDGETS),
@@ -199,11 +177,11 @@ def summarise(
         "train_seed": TRAIN_SEED,
         "tasks": list(tasks),
     }
-    return RunSummary(PROTOCOL, settings, evaluations, {"budgets": budgets}, commit)
+    return RunSummary(PROTOCOL, settings, records, {"budgets": budgets}, commit)
 
 
 def read_known(paths: Sequence[Path]) -> Known:
-    """The validation counts of committed summaries; a (task, budget) given twice is an error."""
+    """The validation records of committed summaries; a (task, budget) given twice is an error."""
     known: Known = {}
     for path in paths:
         for record in read_run_summary(path, PROTOCOL).evaluations:
@@ -212,11 +190,11 @@ def read_known(paths: Sequence[Path]) -> Known:
                     f"--also: expected every evaluation tagged with its steps, got none in {path}"
                 )
             task, steps = record.key[1], int(record.tag("steps"))
-            if steps in known.setdefault(task, {}):
+            if (task, steps) in known:
                 raise ValueError(
                     f"--also: expected each task and budget once, got {task} at {steps} steps again in {path}"
                 )
-            known[task][steps] = (record.successes, record.episodes, record.commit)
+            known[task, steps] = record
     return known
 
 
@@ -237,14 +215,7 @@ def write_report(summary: RunSummary, path: Path) -> None:
     ]
     counts = {(r.key[1], int(r.tag("steps"))): (r.successes, r.episodes) for r in summary.evaluations}
     for task in settings["tasks"]:
-        cells = []
-        for b in budgets:
-            if (task, b) not in counts:
-                cells.append("-")
-                continue
-            successes, episodes = counts[task, b]
-            est = wilson_interval(successes, episodes)
-            cells.append(f"{successes}/{episodes} ({100 * est.low:.1f}-{100 * est.high:.1f} %)")
+        cells = [format_counts(counts.get((task, b))) for b in budgets]
         budget = summary.results["budgets"][task]
         chosen = f"not learned within {budgets[-1]} steps" if budget is None else str(budget)
         lines.append(f"| {task} | " + " | ".join(cells) + f" | {chosen} |")
@@ -306,7 +277,7 @@ def write_outputs(
 ) -> None:
     """``summary.json``, ``sizing.json`` (each decided task's training steps) and ``report.md`` from the
     runs done and the ``known`` counts."""
-    summary = summarise(out, runs, tasks, known, commit)
+    summary = summarise(runs, tasks, known, commit)
     out.mkdir(parents=True, exist_ok=True)
     write_run_summary(out / SUMMARY, summary)
     # What the six-task benchmark trains for (`omnid-benchmark --task-steps`): a task not learned within

@@ -29,7 +29,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from lerobot_omnid.measure.results import RunSummary, read_run_summary
+from lerobot_omnid.measure.results import EvalEntry, EvalRecord, RunSummary, read_run_summary, record_of
 
 STAMPS = "stamps"
 """Folder of the stamps under a campaign's output folder."""
@@ -61,7 +61,8 @@ class Run:
         needs: names of the runs whose outputs this one reads (earlier in the plan).
         episodes: a "record" run's episodes.
         result: an evaluation's table cell (model, task, setting), with its eval ``seed``, the
-            ``train_seed`` of its model and its ``control`` ("" for the checkpoint as trained).
+            ``train_seed`` of its model, its ``control`` ("" for the checkpoint as trained) and its
+            ``tags`` (what else tells the cell from the protocol's others: see ``results.tags_of``).
         inputs: files the command reads that no run of the plan makes.
         fingerprint, stamp: set by :func:`plan`.
     """
@@ -76,6 +77,7 @@ class Run:
     seed: int | None = None
     train_seed: int | None = None
     control: str = ""
+    tags: tuple[tuple[str, str], ...] = ()
     inputs: tuple[Path, ...] = ()
     fingerprint: str = ""
     stamp: Path | None = None
@@ -340,6 +342,32 @@ def run_protocol(
             stop_on_failure=True,
         )
     write_outputs()
+
+
+def eval_entry(run: Run) -> EvalEntry:
+    """An evaluation run as the cell it fills, with the commit of its stamp."""
+    if run.kind != "eval" or run.result is None:
+        raise ValueError(
+            f"{run.name}: expected an evaluation run with its table cell (result), got kind {run.kind!r} "
+            f"and result {run.result!r}"
+        )
+    return EvalEntry(
+        run.result,
+        run.seed,
+        run.output / "eval_info.json",
+        run.train_seed,
+        run.control,
+        portable_command(run.cmd),
+        stamp_commit(run),
+        run.fingerprint,
+        run.tags,
+    )
+
+
+def evaluations(runs: Sequence[Run]) -> list[EvalRecord]:
+    """The records of the evaluations of ``runs`` that are done, in plan order: each its cell's counts
+    (from its ``eval_info.json``), seeds, control, tags, command, commit and fingerprint."""
+    return [record_of(eval_entry(r)) for r in runs if r.kind == "eval" and is_done(r)]
 
 
 def write_stamp(run: Run, commit: str | None, seconds: float) -> None:

@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from lerobot_omnid.measure.results import CellResult, EvalEntry, EvalRecord, Key, collect, train_seeds
-from lerobot_omnid.measure.stats import Estimate, fisher_exact, rate_difference
+from lerobot_omnid.measure.stats import Estimate, fisher_exact, rate_difference, wilson_interval
 
 MISSING = "—"
 HOLD_LABEL = "(holding the measured pose)"
@@ -39,10 +39,14 @@ def format_rate(cell: CellResult) -> str:
     return f"{cell.rate:.1f} ({100 * interval.low:.1f}-{100 * interval.high:.1f})"
 
 
-def format_counts(cell: CellResult) -> str:
-    """``5/10 (23.7-76.3 %)``."""
-    interval = cell.interval
-    return f"{cell.successes}/{cell.episodes} ({100 * interval.low:.1f}-{100 * interval.high:.1f} %)"
+def format_counts(cell: CellResult | tuple[int, int] | None) -> str:
+    """``5/10 (23.7-76.3 %)``: successes of episodes (a cell, or the pair) and the Wilson 95 % interval;
+    :data:`MISSING` for a cell not evaluated (None)."""
+    if cell is None:
+        return MISSING
+    successes, episodes = (cell.successes, cell.episodes) if isinstance(cell, CellResult) else cell
+    interval = wilson_interval(successes, episodes)
+    return f"{successes}/{episodes} ({100 * interval.low:.1f}-{100 * interval.high:.1f} %)"
 
 
 def format_difference(estimate: Estimate) -> str:

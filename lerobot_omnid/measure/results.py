@@ -46,8 +46,8 @@ with the value a summary written before the field existed means."""
 @dataclass(frozen=True)
 class EvalEntry:
     """A finished evaluation of the plan: its cell, eval ``seed``, ``eval_info.json``, the training seed of
-    its model, its control ("" for the checkpoint as trained), its command, the commit that ran it and the
-    engine's fingerprint of the run."""
+    its model, its control ("" for the checkpoint as trained), its command, the commit that ran it, the
+    engine's fingerprint of the run and its tags (as :class:`EvalRecord`'s)."""
 
     key: Key
     seed: int | None
@@ -57,6 +57,7 @@ class EvalEntry:
     command: tuple[str, ...] = ()
     commit: str | None = None
     fingerprint: str = ""
+    tags: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -176,7 +177,8 @@ def record_of(entry: EvalEntry) -> EvalRecord:
         str(entry.path),
         entry.commit,
         entry.command,
-        fingerprint=entry.fingerprint,
+        entry.tags,
+        entry.fingerprint,
     )
 
 

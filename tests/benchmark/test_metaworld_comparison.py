@@ -78,7 +78,7 @@ def test_report_pools_the_ranges_and_puts_the_published_numbers_beside(tmp_path,
         overall = {"pc_success": 100 * successes / mw.TEST_EPISODES, "n_episodes": mw.TEST_EPISODES}
         (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
         engine.write_stamp(run, "abc", 1.0)
-    source = write_run_summary(tmp_path / "summary.json", mw.summarise(tmp_path, runs))
+    source = write_run_summary(tmp_path / "summary.json", mw.summarise(runs))
     assert mw.main(["--out", str(tmp_path / "rebuilt"), "--report-only", "--summary", str(source)]) == 0
     report = (tmp_path / "rebuilt" / "report.md").read_text()
     assert "| push-v3 | 24/30 (62.7-90.5 %) | 2/30 (1.8-21.3 %) | 12/30 (24.6-57.7 %) | 0/30" in report

@@ -153,7 +153,7 @@ def test_summary_selects_only_once_every_hypothesis_is_validated(tmp_path):
         overall = {"pc_success": 100 * counts[hypothesis] / 20, "n_episodes": 20}
         (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
         engine.write_stamp(run, "abc", 1.0)
-        summary = nc.summarise(tmp_path, runs)
+        summary = nc.summarise(runs)
         found = {r.key[0]: (r.successes, r.episodes, r.commit) for r in summary.evaluations}
         assert found[hypothesis] == (counts[hypothesis], 20, "abc")
         assert summary.results["selected"] == ("long" if len(found) == len(counts) else None)

@@ -10,6 +10,7 @@ from omnid_testing import COMMITTED_SUMMARIES
 
 from lerobot_omnid.benchmark import readout_selection as rs
 from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, HELDOUT_SEED, PROFILES
+from lerobot_omnid.measure import engine
 from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 
 OUT, DATA = Path("out"), Path("data")
@@ -43,7 +44,7 @@ def test_validation_seeds_are_disjoint_from_training_test_and_other_recordings()
     test = {s for k in paper.eval_seeds for s in env_seeds(k * 1000, paper.eval_episodes)}
     others = env_seeds(0, 1000) | env_seeds(FEWSHOT_SEED, 1000) | env_seeds(HELDOUT_SEED, 1000)
     assert not validation & (test | others | env_seeds(rs.TEST_SEED, rs.TEST_EPISODES))
-    cmd = options(rs.evaluate(OUT, "validation", "bev_conv", "id", "cpu"))
+    cmd = options(rs.evaluation(OUT, "validation", "bev_conv", "id", "cpu").cmd)
     assert cmd["--seed"] == str(rs.VALIDATION_SEED) and cmd["--eval.n_episodes"] == "20"
     assert cmd["--env.layout"] == "id" and cmd["--env.background"] == "id"
     record_cmd = rs.validation_runs(OUT, DATA, "cpu", record_data=False)[0].cmd
@@ -88,33 +89,53 @@ def write_eval(folder: Path, successes: int, episodes: int) -> None:
     (folder / "eval_info.json").write_text(json.dumps({"overall": overall}))
 
 
+def finish(runs, made: dict[str, tuple[int, int] | float]) -> None:
+    """Leave each run named in ``made`` finished for its plan: an evaluation's counts (successes,
+    episodes), an open-loop run's TCP error (cm), and its stamp."""
+    for run in runs:
+        if run.name not in made:
+            continue
+        run.output.mkdir(parents=True, exist_ok=True)
+        if run.kind == "eval":
+            write_eval(run.output, *made[run.name])
+        else:
+            errors = {"position_cm": made[run.name], "gripper": 0.02}
+            (run.output / rs.OFFLINE_OUTPUT).write_text(json.dumps(errors))
+        engine.write_stamp(run, "abc", 1.0)
+
+
 def test_report_tables_the_validation_and_tests_selected_against_flatten(tmp_path):
-    for readout, (successes, position) in {"flatten": (2, 1.5), "bev_conv": (11, 0.7)}.items():
-        write_eval(rs.eval_dir(tmp_path, "validation", readout, "id"), successes, 20)
-        offline = tmp_path / "offline" / readout / rs.OFFLINE_OUTPUT
-        offline.parent.mkdir(parents=True)
-        offline.write_text(json.dumps({"position_cm": position, "gripper": 0.02}))
     (tmp_path / rs.SELECTION_FILE).write_text(json.dumps({"selected": "bev_conv"}))
-    write_eval(rs.eval_dir(tmp_path, "test", "bev_conv", "id"), 7, 30)
-    write_eval(rs.eval_dir(tmp_path, "test", "flatten", "id"), 4, 30)
-    done = {rs.eval_dir(tmp_path, phase, r, "id") for phase in ("validation", "test") for r in PLANE_READOUTS}
-    done = {folder for folder in done if folder.is_dir()} | {tmp_path / "offline" / r for r in PLANE_READOUTS}
-    summary = rs.report(tmp_path, done)
+    runs = rs.protocol(tmp_path, tmp_path / "data", "cpu", True, "bev_conv")
+    made = {"eval/validation/flatten": (2, 20), "offline/flatten": 1.5}
+    made |= {"eval/validation/bev_conv": (11, 20), "offline/bev_conv": 0.7}
+    made |= {"eval/test/bev_conv/id": (7, 30), "eval/test/flatten/id": (4, 30)}
+    finish(runs, made)
+    summary = rs.report(tmp_path, runs)
     validation = {r.key[0]: r.successes for r in summary.evaluations if r.tag("phase") == "validation"}
     assert validation == {"flatten": 2, "bev_conv": 11}
+    assert {r.commit for r in summary.evaluations} == {"abc"}
+    assert rs.validation_results(runs)["bev_conv"] == {
+        "successes": 11,
+        "episodes": 20,
+        "position_cm": 0.7,
+        "gripper": 0.02,
+    }
     text = (tmp_path / "report.md").read_text()
     assert "| bev_conv | 11/20 (34.2-74.2 %) | 0.70 | 0.020 | **yes** |" in text
     assert "| flatten | 2/20 (2.8-30.1 %) | 1.50 | 0.020 |  |" in text
-    assert "| id | 4/30 (5.3-29.7 %) | 7/30 (11.8-40.9 %) | 0.506 |" in text
-    assert "| ood1 | - | - |  |" in text
+    assert "| id | 4/30 (5.3-29.7 %) | 7/30 (11.8-40.9 %) | 0.506 |" in text  # PLANE_READOUTS' order
+    assert "| ood1 | — | — |  |" in text
 
 
 def test_report_leaves_out_runs_not_made_for_the_plan(tmp_path):
-    write_eval(rs.eval_dir(tmp_path, "validation", "flatten", "id"), 2, 20)
-    offline = tmp_path / "offline" / "flatten" / rs.OFFLINE_OUTPUT
-    offline.parent.mkdir(parents=True)
-    offline.write_text(json.dumps({"position_cm": 1.5, "gripper": 0.02}))
-    assert rs.report(tmp_path, set()).evaluations == []
+    """Outputs without a stamp of this plan (another plan's, or a copied folder's) are not results."""
+    runs = rs.protocol(tmp_path, tmp_path / "data", "cpu", True, None)
+    finish(runs, {"eval/validation/flatten": (2, 20), "offline/flatten": 1.5})
+    other = rs.protocol(tmp_path, tmp_path / "other_data", "cpu", True, None)
+    assert rs.report(tmp_path, other).evaluations == []
+    assert rs.validation_results(other) == {}
+    assert [r.key[0] for r in rs.report(tmp_path, runs).evaluations] == ["flatten"]
 
 
 def test_dry_run_plans_validation_then_test_once_selected(tmp_path, capsys):

@@ -83,7 +83,7 @@ def test_a_longer_budget_only_for_a_task_validated_below_the_threshold(tmp_path)
     assert f"--steps={ts.BUDGETS[1]}" in longer[0].cmd
     for run in longer:
         finish(tmp_path, run, 0)
-    summary = ts.summarise(tmp_path, ts.protocol(tmp_path, tasks), tasks)
+    summary = ts.summarise(ts.protocol(tmp_path, tasks), tasks)
     found = {(r.key[1], r.tag("steps")): (r.successes, r.episodes, r.commit) for r in summary.evaluations}
     assert found[("select_apple", "1000")] == (6, 20, "abc") and ("select_apple", "3000") not in found
     assert summary.results["budgets"]["select_apple"] == 1000
@@ -107,7 +107,7 @@ def test_budgets_of_committed_summaries_are_not_run_again(tmp_path):
         "train/diffusion/texas_holdem",
         f"validation/diffusion/texas_holdem/steps{ts.BUDGETS[0]}",
     ]
-    summary = ts.summarise(tmp_path / "out", runs, tasks, known)
+    summary = ts.summarise(runs, tasks, known)
     apple = [r for r in summary.evaluations if r.key[1] == "select_apple"]
     assert [(r.successes, r.commit, r.tag("steps")) for r in apple] == [(9, "c1", "1000")]
     assert summary.results["budgets"] == {
@@ -154,7 +154,7 @@ def test_report_only_rebuilds_the_report_from_a_summary(tmp_path, capsys):
     )
     assert ts.main(["--out", str(tmp_path / "out"), "--report-only", "--summary", str(source)]) == 0
     report = (tmp_path / "out" / "report.md").read_text()
-    assert "| select_apple | 12/20 (38.7-78.1 %) | - | 1000 |" in report
+    assert "| select_apple | 12/20 (38.7-78.1 %) | — | 1000 |" in report
     assert (
         "| texas_holdem | 1/20 (0.9-23.6 %) | 3/20 (5.2-36.0 %) | not learned within 3000 steps |" in report
     )
