@@ -22,6 +22,7 @@ import pytest
 from lerobot_omnid.benchmark import robustness
 from lerobot_omnid.measure.across_tasks import above
 from lerobot_omnid.measure.results import (
+    CellResult,
     EvalRecord,
     check_comparable,
     collect,
@@ -267,7 +268,7 @@ def sentence_errors(text: str, records: Sequence[EvalRecord], fewshot: Sequence[
         errors += p_errors("headline: few-shot p", m[5], fisher_exact(*omnid, *dp))
         for model, tuned in (("omnid", omnid), ("diffusion", dp)):
             blind = counts(fewshot, model, ("fewshot_a",), "blind")
-            if tuned[0] > blind[0] and fisher_exact(*tuned, *blind) < 0.05:
+            if above(CellResult(*tuned, ()), CellResult(*blind, ())):
                 errors.append(f"headline: few-shot {model} {tuned} is above its blind control {blind}")
     return errors
 
