@@ -93,3 +93,25 @@ def test_recorded_commands_name_paths_relative_to_the_working_folder(tmp_path, m
 def test_a_fingerprint_names_the_program_not_where_it_is_installed(tmp_path):
     here, there = (Run("a", "eval", (f"{venv}/bin/lerobot-eval", "--seed=1"), tmp_path) for venv in "xy")
     assert plan([here], tmp_path)[0].fingerprint == plan([there], tmp_path)[0].fingerprint
+
+
+def test_evaluations_are_the_records_of_the_done_runs_with_their_cells(tmp_path):
+    """Each done evaluation gives its cell's record (counts, seeds, control, tags, commit); one not done for
+    this plan gives none; an evaluation without its cell is refused by name."""
+    cell = {"result": ("omnid", TASK0, "id"), "seed": 1000, "train_seed": 1001, "control": "blind"}
+    done = dataclasses.replace(evaluation(tmp_path, "done", "40"), tags=(("rig", "higher"),), **cell)
+    pending = dataclasses.replace(evaluation(tmp_path, "pending"), **cell)
+    runs = plan([done, pending], tmp_path)
+    runs[0].output.mkdir()
+    (runs[0].output / "eval_info.json").write_text('{"overall": {"pc_success": 40.0, "n_episodes": 5}}')
+    engine.write_stamp(runs[0], "abc", 1.0)
+    (record,) = engine.evaluations(runs)
+    assert (record.key, record.eval_seed, record.train_seed, record.control) == (*cell.values(),)
+    assert (record.successes, record.episodes, record.commit, record.tag("rig")) == (2, 5, "abc", "higher")
+    assert record.fingerprint == runs[0].fingerprint and record.command == runs[0].cmd
+    without_cell = plan([evaluation(tmp_path, "bare")], tmp_path)[0]
+    (without_cell.output).mkdir()
+    (without_cell.output / "eval_info.json").write_text('{"overall": {"pc_success": 0.0, "n_episodes": 1}}')
+    engine.write_stamp(without_cell, "abc", 1.0)
+    with pytest.raises(ValueError, match="bare: expected an evaluation run with its table cell"):
+        engine.evaluations([without_cell])
