@@ -108,7 +108,8 @@ def test_evaluations_are_the_records_of_the_done_runs_with_their_cells(tmp_path)
     (record,) = engine.evaluations(runs)
     assert (record.key, record.eval_seed, record.train_seed, record.control) == (*cell.values(),)
     assert (record.successes, record.episodes, record.commit, record.tag("rig")) == (2, 5, "abc", "higher")
-    assert record.fingerprint == runs[0].fingerprint and record.command == runs[0].cmd
+    assert record.fingerprint == runs[0].fingerprint
+    assert record.command == engine.portable_command(runs[0].cmd)  # as a committed summary writes it
     without_cell = plan([evaluation(tmp_path, "bare")], tmp_path)[0]
     (without_cell.output).mkdir()
     (without_cell.output / "eval_info.json").write_text('{"overall": {"pc_success": 0.0, "n_episodes": 1}}')
