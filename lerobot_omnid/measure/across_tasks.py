@@ -127,8 +127,8 @@ def task_table(
         controlled = by_control.get("blind", {})
         blind = [counts for t in pick for counts in _paired(cells, controlled, method, t, setting)]
         text = [label, labels.get(method, method), _marked(cell, blind)]
-        text += [format_counts(c) if (c := total(by_range[k])) else MISSING for k in seeds]
-        text += [format_counts(c) if (c := total(by_control[k])) else MISSING for k in controls]
+        text += [format_counts(total(by_range[k])) for k in seeds]
+        text += [format_counts(total(by_control[k])) for k in controls]
         if unseen is not None:
             # Its blind control is the ID one: the same env seeds, and a blind policy sees no table.
             unseen_blind = [c for t in pick for c in _paired(cells, controlled, method, t, unseen, setting)]
