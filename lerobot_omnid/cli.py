@@ -68,5 +68,9 @@ def add_protocol_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dry-run", action="store_true", help="print every planned command, run nothing")
     parser.add_argument("--report-only", action="store_true", help="run nothing; report what is done")
     parser.add_argument(
-        "--summary", type=Path, help="with --report-only: rebuild <out>/report.md from this summary.json"
+        "--summary",
+        nargs="+",
+        type=Path,
+        help="with --report-only: rebuild <out>/report.md from this summary.json (several: the parts of one "
+        "run, e.g. one task each, merged)",
     )

@@ -161,8 +161,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--report-only", action="store_true", help="only rebuild the report from results")
     parser.add_argument(
         "--summary",
+        nargs="+",
         type=Path,
-        help="with --report-only: rebuild <out>/report.md from this summary.json alone (no --checkpoint)",
+        help="with --report-only: rebuild <out>/report.md from this summary.json alone (no --checkpoint; "
+        "several: the parts of one run, merged)",
     )
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser

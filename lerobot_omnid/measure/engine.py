@@ -29,7 +29,14 @@ from typing import Any
 
 from tqdm import tqdm
 
-from lerobot_omnid.measure.results import EvalEntry, EvalRecord, RunSummary, read_run_summary, record_of
+from lerobot_omnid.measure.results import (
+    EvalEntry,
+    EvalRecord,
+    RunSummary,
+    merge_run_summaries,
+    read_run_summary,
+    record_of,
+)
 
 STAMPS = "stamps"
 """Folder of the stamps under a campaign's output folder."""
@@ -397,15 +404,16 @@ def report_from_summary(
     protocol: str,
     write_report: Callable[[RunSummary, Path], object],
 ) -> bool:
-    """With ``--summary``: ``write_report(summary, <out>/report.md)`` from that run summary of ``protocol``
-    alone (a committed one; no run folder needed), and True; without it, False. ``--summary`` needs
-    ``--report-only``."""
-    if args.summary is None:
+    """With ``--summary``: ``write_report(summary, <out>/report.md)`` from those run summaries of
+    ``protocol`` alone (committed ones; no run folder needed; several: parts of one protocol run, e.g. one
+    task each, merged), and True; without it, False. ``--summary`` needs ``--report-only``."""
+    if not args.summary:
         return False
     if not args.report_only:
         parser.error("--summary: expected with --report-only, got it without")
     try:
-        summary = read_run_summary(args.summary, protocol)
+        parts = [read_run_summary(path, protocol) for path in args.summary]
+        summary = merge_run_summaries(parts, [str(path) for path in args.summary])
     except ValueError as e:
         parser.error(f"--summary: {e}")
     write_report(summary, out / "report.md")

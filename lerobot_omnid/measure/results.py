@@ -259,6 +259,37 @@ def read_run_summary(path: Path, protocol: str) -> RunSummary:
     )
 
 
+def merge_run_summaries(summaries: Sequence[RunSummary], sources: Sequence[str]) -> RunSummary:
+    """One run summary of the evaluations of ``summaries`` (from the files ``sources``): the parts of one
+    protocol run in several folders or sessions (e.g. one task each). They must share the protocol,
+    settings and results; an evaluation in two of them is an error, not counted twice."""
+    first, first_source = summaries[0], sources[0]
+    seen: dict[tuple, str] = {}
+    for summary, source in zip(summaries, sources, strict=True):
+        for part in ("protocol", "settings", "results"):
+            if getattr(summary, part) != getattr(first, part):
+                raise ValueError(
+                    f"{source}: {part}: expected those of {first_source} to merge with it, got "
+                    f"{getattr(summary, part)!r} against {getattr(first, part)!r}"
+                )
+        for record in summary.evaluations:
+            if record.identity in seen:
+                raise ValueError(
+                    f"{source}: evaluation {record.identity}: expected it in one summary only, got it in "
+                    f"{seen[record.identity]} too"
+                )
+            seen[record.identity] = source
+    commits = ", ".join(dict.fromkeys(s.commit for s in summaries if s.commit)) or None
+    return RunSummary(
+        first.protocol,
+        first.settings,
+        [r for s in summaries for r in s.evaluations],
+        first.results,
+        commits,
+        first.command,
+    )
+
+
 def write_summary(
     path: Path,
     profile: Mapping[str, Any],

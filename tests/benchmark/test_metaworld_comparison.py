@@ -87,6 +87,26 @@ def test_report_pools_the_ranges_and_puts_the_published_numbers_beside(tmp_path,
     assert "| push-v3 | omnid vs dp | 0.00" in report
 
 
+def test_a_run_split_by_task_is_reported_as_one(tmp_path):
+    """One task a session: each folder's summary alone, then the report of them merged."""
+    sources = []
+    for task, successes in (("push-v3", 9), ("assembly-v3", 4)):
+        out = tmp_path / task
+        runs = mw.protocol(out, [task], ["omnid"])
+        for run in runs:
+            if run.kind == "eval":
+                run.output.mkdir(parents=True)
+                overall = {"pc_success": 100 * successes / mw.TEST_EPISODES, "n_episodes": mw.TEST_EPISODES}
+                (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
+                engine.write_stamp(run, "abc", 1.0)
+        sources.append(str(write_run_summary(out / "summary.json", mw.summarise(runs))))
+    assert mw.main(["--out", str(tmp_path / "rebuilt"), "--report-only", "--summary", *sources]) == 0
+    report = (tmp_path / "rebuilt" / "report.md").read_text()
+    assert "| assembly-v3 | 8/30" in report and "| push-v3 | 18/30" in report
+    with pytest.raises(SystemExit):  # the same part twice would count its episodes twice
+        mw.main(["--out", str(tmp_path / "twice"), "--report-only", "--summary", sources[0], sources[0]])
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [

@@ -13,6 +13,7 @@ from lerobot_omnid.measure.results import (
     EvalRecord,
     RunSummary,
     check_comparable,
+    merge_run_summaries,
     read_run_summary,
     tags_of,
     write_run_summary,
@@ -52,6 +53,24 @@ def test_other_formats_and_protocols_are_refused(tmp_path):
         read_run_summary(path, "a_protocol")
     with pytest.raises(ValueError, match="expected a run summary of a_protocol"):
         read_run_summary(tmp_path / "missing.json", "a_protocol")
+
+
+def test_parts_of_one_run_merge_and_others_are_refused():
+    def part(task: str, settings: dict | None = None, commit: str = "abc") -> RunSummary:
+        record = EvalRecord(("omnid", task, "id"), "", 1000, 1000, 3, 15, "x", commit)
+        return RunSummary("a_protocol", settings or {"steps": 2000}, [record], {"published": {}}, commit)
+
+    merged = merge_run_summaries([part("push-v3"), part("assembly-v3", commit="def")], ["a", "b"])
+    assert [r.key[1] for r in merged.evaluations] == ["push-v3", "assembly-v3"]
+    assert merged.settings == {"steps": 2000} and merged.commit == "abc, def"
+    with pytest.raises(
+        ValueError, match=r"b: settings: expected those of a to merge with it, got \{'steps': 1\}"
+    ):
+        merge_run_summaries([part("push-v3"), part("assembly-v3", {"steps": 1})], ["a", "b"])
+    with pytest.raises(
+        ValueError, match=r"b: evaluation .*push-v3.*: expected it in one summary only, got it in a"
+    ):
+        merge_run_summaries([part("push-v3"), part("push-v3")], ["a", "b"])
 
 
 COMMITTED = Path(__file__).resolve().parents[2] / "docs" / "results"
