@@ -53,7 +53,7 @@ def test_wilson_interval_solves_the_score_equation():
         (((3, 4), (1, 4)), 0.4857),  # Fisher's tea tasting [[3, 1], [1, 3]]: R's fisher.test(TeaTasting)
         (((12, 40), (0, 40)), 0.0001855),  # 12/40 vs 0/40: the p = 0.0002 of docs/results.md
         (((7, 10), (0, 10)), 0.003096),  # 7/10 vs 0/10 blind: 2 * comb(13, 3) / comb(20, 10), p = 0.003
-        (((7, 10), (5, 10)), 0.6499),  # 70 % vs 50 % of 10 each: the p = 0.65 of issue 18
+        (((7, 10), (5, 10)), 0.6499),  # 70 % vs 50 % of 10 each: p = 0.65, far from any difference
         (((0, 5), (0, 5)), 1.0),
     ],
 )
