@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from lerobot_omnid.benchmark.robustness_plan import CONTROLS, DEAD, LABELS, Cell
+from lerobot_omnid.measure.across_tasks import above
 from lerobot_omnid.measure.charts import error_bars, pyplot, save_figure
 from lerobot_omnid.measure.results import CellResult
 from lerobot_omnid.measure.stats import equal_rates, fisher_exact, rate_difference
@@ -32,7 +33,6 @@ SERIES_COLOURS = {
     "dead_black_mid": "tab:purple",
 }
 SERIES_SHIFT = 0.06  # fraction of the spacing between x positions that series are shifted by, so bars show
-SIGNIFICANT = 0.05  # two-sided Fisher p below which a difference counts
 TARGET_LEVEL = 1.0  # robustness targets: the calibration error (cm and degrees) at which ...
 TARGET_CALIBRATION_SHARE = 80.0  # ... at least this share (%) of the rate as trained is kept
 TARGET_DEAD_SHARE = 50.0  # and with one camera dead, at least this share
@@ -124,12 +124,6 @@ def _as_trained(row: Row, nominal: Row) -> CellResult:
     return row.as_trained or nominal.result
 
 
-def _above(row: CellResult, control: CellResult) -> bool:
-    """Whether ``row`` is significantly above ``control`` (higher rate, two-sided Fisher p < 0.05)."""
-    p = fisher_exact(row.successes, row.episodes, control.successes, control.episodes)
-    return row.rate > control.rate and p < SIGNIFICANT
-
-
 def target_lines(rows: Sequence[Row]) -> list[str]:
     """The robustness targets for one checkpoint: the share of its rate as trained kept at 1 cm / 1 degree of
     calibration error (at least 80 %) and with one camera dead, per variant pooled over the cameras (at
@@ -142,7 +136,7 @@ def target_lines(rows: Sequence[Row]) -> list[str]:
         return []
     if blind is None or blind.as_trained is None:
         counted = "not counted: no blind control"
-    elif _above(blind.as_trained, blind.result):
+    elif above(blind.as_trained, blind.result):
         counted = "counted: significantly above its blind control"
     else:
         counted = "not counted: not significantly above its blind control"
@@ -208,7 +202,7 @@ def checkpoint_lines(label: str, description: str, rows: Sequence[Row], chart: s
     for control in CONTROLS:
         if control in found:
             a, b = _as_trained(found[control], nominal), found[control].result
-            verdict = "significantly above" if _above(a, b) else "not significantly above"
+            verdict = "significantly above" if above(a, b) else "not significantly above"
             lines.append(f"- as trained against its {LABELS[control]}: {_versus(a, b)}: {verdict} it.")
     if "blind" in found:
         lines += [
