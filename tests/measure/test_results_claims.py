@@ -345,8 +345,8 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     for old, new in (
         ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
         ("on `add_condiment`,", "on `select_apple`,"),  # OmniD, DP and ACT are above theirs there
-        ("and `get_coffee` none", "and `select_apple` none"),  # the list's last task is checked too
-        ("OmniD 51/150 vs DP 34/150", "OmniD 51/150 vs DP 33/150"),
+        ("and `texas_holdem` none", "and `select_apple` none"),  # the list's last task is checked too
+        ("OmniD 51/180 vs DP 34/180", "OmniD 51/180 vs DP 33/180"),
         ("(p = 0.026), ACT", "(p = 0.26), ACT"),
         ("vs 2/30, 7/30, 14/30", "vs 2/30, 7/30, 13/30"),  # the second task's sentence is checked too
         ("controls: OmniD, ACT)", "controls: OmniD, ACT, VQ-BeT)"),  # VQ-BeT's blind does as well
