@@ -67,7 +67,7 @@ from lerobot_omnid.benchmark.robustness_report import (
     table_rows,
 )
 from lerobot_omnid.calibration.rig_file import save_calibration_file
-from lerobot_omnid.cli import csv_of, int_at_least
+from lerobot_omnid.cli import add_protocol_options, csv_of, int_at_least
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import Run, code_commit, describe_plan, evaluations, execute, is_done
 from lerobot_omnid.measure.results import (
@@ -157,15 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="envs each lerobot-eval runs at once (--eval.batch_size; default "
         f"{RobustnessSettings.batch_size}, as the mini benchmark); the env seeds do not change",
     )
-    parser.add_argument("--dry-run", action="store_true", help="print every command, run nothing")
-    parser.add_argument("--report-only", action="store_true", help="only rebuild the report from results")
-    parser.add_argument(
-        "--summary",
-        nargs="+",
-        type=Path,
-        help="with --report-only: rebuild <out>/report.md from this summary.json alone (no --checkpoint; "
-        "several: the parts of one run, merged)",
-    )
+    add_protocol_options(parser)  # --summary needs no --checkpoint
     parser.add_argument("--verbose", action="store_true", help="show the output of every command")
     return parser
 
