@@ -12,6 +12,7 @@ resolves, the rebuild commands name committed summaries, and no path of one mach
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Sequence
 from dataclasses import astuple
@@ -354,6 +355,58 @@ def test_readme_six_task_counts_match_the_campaign_summary():
     ):
         edited = readme.replace(old, new)
         assert edited != readme and six_task_errors(edited, records) != []
+
+
+MULTITASK_SENTENCE = (
+    r"one (OmniD|DP) for all (\d) tasks \((\d+) steps\) (\d+)/(\d+) \(blind (\d+)/(\d+)\) "
+    r"vs the single-task models' (\d+)/(\d+) \(p = ([\d.<\s]+)\)"
+)
+"""The headline's multi-task sentence (once per method measured): the one model's ID counts over the
+tasks, its blind control's, the single-task models' of its method, and their Mantel-Haenszel p."""
+MULTITASK_STEPS = ROOT / "docs" / "six_tasks_steps.json"
+"""The single-task budgets; the one model trains for their sum."""
+
+
+def multitask_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
+    """The headline's multi-task counts against the campaign's summary."""
+    errors: list[str] = []
+    text = " ".join(headline_section(readme).split())
+    cells, blind = collect(records), collect(records, "blind")
+    sentences = list(re.finditer(MULTITASK_SENTENCE, text))
+    if not any(m[1] == "OmniD" for m in sentences):
+        errors.append(f"headline: expected OmniD's sentence matching {MULTITASK_SENTENCE!r}, found none")
+    steps = sum(json.loads(MULTITASK_STEPS.read_text()).values())
+    for m in sentences:
+        single = SIX_TASK_NAMES[m[1]]
+        together = single + "_multitask"
+        tasks = [t for (model, t, setting) in cells if model == together and setting == "id"]
+        truth = [len(tasks), steps]
+        for table, model in ((cells, together), (blind, together), (cells, single)):
+            truth += [sum(astuple(table[(model, t, "id")])[i] for t in tasks) for i in (0, 1)]
+        stated = [int(x) for x in m.groups()[1:9]]
+        if stated != truth:
+            errors.append(f"headline: {m[1]} for all tasks: stated {stated}, the summary gives {truth}")
+        strata = [
+            (*astuple(cells[(together, t, "id")])[:2], *astuple(cells[(single, t, "id")])[:2]) for t in tasks
+        ]
+        errors += p_errors(f"headline: {m[1]} for all tasks p", m[10], mantel_haenszel(strata))
+    return errors
+
+
+def test_readme_multitask_counts_match_the_campaign_summary():
+    records = load([SIX_TASKS_SUMMARY])
+    readme = README.read_text()
+    assert multitask_errors(readme, records) == []
+    for old, new in (
+        ("78/180 (blind", "79/180 (blind"),
+        ("(blind 12/180)", "(blind 9/180)"),
+        ("models' 51/180", "models' 34/180"),
+        ("51/180 (p = 0.0016)", "51/180 (p = 0.026)"),
+        ("(14000 steps)", "(3000 steps)"),
+        ("one OmniD for all", "one OmniD for every"),  # OmniD's sentence gone
+    ):
+        edited = readme.replace(old, new)
+        assert edited != readme and multitask_errors(edited, records) != []
 
 
 NEW_CAMERA_SUMMARIES = ("new-camera_seed1000_cpu2.json", "new-camera_seed1001_cpu2.json")
