@@ -1,5 +1,6 @@
-"""Every rebuild command of docs/results.md and docs/results/diagnostics.md, run on the committed summaries
-alone: each section names one, and it must run (no checkpoint, no run folder) and write its table.
+"""Every rebuild command of docs/results.md, docs/results/diagnostics.md and docs/results/validation.md, run
+on the committed summaries alone: each section names one, and it must run (no checkpoint, no run folder)
+and write its table.
 
 The commands are run in this process, through the console scripts' and modules' own ``main`` functions, with
 ``--out`` pointed at a temporary folder; the page's ```` ```bash ```` blocks and inline report commands are
@@ -19,7 +20,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-RESULTS_PAGES = (ROOT / "docs" / "results.md", ROOT / "docs" / "results" / "diagnostics.md")
+RESULTS_PAGES = tuple(
+    ROOT / "docs" / page for page in ("results.md", "results/diagnostics.md", "results/validation.md")
+)
 CONSOLE_SCRIPTS = {  # console script: module whose main(argv) it calls (pyproject.toml's [project.scripts])
     "omnid-benchmark": "lerobot_omnid.benchmark.benchmark",
     "omnid-robustness": "lerobot_omnid.benchmark.robustness",

@@ -38,6 +38,7 @@ README = ROOT / "README.md"
 RESULTS_PAGE = ROOT / "docs" / "results.md"
 HISTORY_PAGE = ROOT / "docs" / "results" / "history.md"
 DIAGNOSTICS_PAGE = ROOT / "docs" / "results" / "diagnostics.md"
+VALIDATION_PAGE = ROOT / "docs" / "results" / "validation.md"
 SUMMARIES = ROOT / "docs" / "results"
 HEADLINE_SUMMARIES = ("mini_seed1000-1001_eval30_cpu2.json", "mini_seed1002_eval30_cpu2.json")
 """The three-seed OmniD-vs-DP run: docs/results.md's "In distribution" rebuild command pools these."""
@@ -542,7 +543,9 @@ def test_an_edited_readme_fails(old, new, headline_records, fewshot_records):
     assert len(errors) == 1, f"editing {old!r} -> {new!r}: expected one error, got {errors}"
 
 
-@pytest.mark.parametrize("page", [RESULTS_PAGE, HISTORY_PAGE], ids=["results", "history"])
+@pytest.mark.parametrize(
+    "page", [RESULTS_PAGE, HISTORY_PAGE, VALIDATION_PAGE], ids=["results", "history", "validation"]
+)
 def test_every_interval_on_the_results_pages_is_its_counts_wilson_interval(page):
     found = ON_PAGE.findall(page.read_text())
     assert found, f"{page.name}: no 'k/n (low-high %)' found"
@@ -586,13 +589,13 @@ def link_errors(page: Path, only_into: Sequence[Path] = ()) -> list[str]:
 
 
 def test_links_of_the_results_pages_resolve():
-    pages = [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, SUMMARIES / "README.md"]
+    pages = [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, VALIDATION_PAGE, SUMMARIES / "README.md"]
     assert [e for page in pages for e in link_errors(page)] == []
 
 
 def test_links_into_the_results_pages_resolve():
     pages = [README, *(ROOT / "docs").glob("*.md")]
-    into = [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE]
+    into = [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, VALIDATION_PAGE]
     assert [e for page in pages for e in link_errors(page, into)] == []
 
 
@@ -606,7 +609,9 @@ def test_rebuild_commands_name_the_committed_summaries():
 
 
 @pytest.mark.parametrize(
-    "page", [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, SUMMARIES / "README.md"], ids=lambda p: p.name
+    "page",
+    [RESULTS_PAGE, HISTORY_PAGE, DIAGNOSTICS_PAGE, VALIDATION_PAGE, SUMMARIES / "README.md"],
+    ids=lambda p: p.name,
 )
 def test_no_path_of_one_machine(page):
     text = page.read_text()
