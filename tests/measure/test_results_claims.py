@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import astuple
 from pathlib import Path
 
@@ -127,6 +127,20 @@ def p_errors(where: str, text: str, p: float) -> list[str]:
     if not below and abs(p - float(value)) > 0.5 * 10**-decimals:
         return [f"{where}: Fisher p = {p:.2g}, the README says {value}"]
     return []
+
+
+def assert_each_edit_is_caught(
+    check: Callable[[str, Sequence[EvalRecord]], list[str]],
+    records: Sequence[EvalRecord],
+    edits: Sequence[tuple[str, str]],
+) -> None:
+    """``check`` finds no error in the README and at least one in each edit of it: the check can fail."""
+    readme = README.read_text()
+    assert check(readme, records) == []
+    for old, new in edits:
+        edited = readme.replace(old, new)
+        assert edited != readme, f"the README no longer contains {old!r}: update this edit"
+        assert check(edited, records) != [], f"editing {old!r} -> {new!r} went unnoticed"
 
 
 def headline_section(readme: str) -> str:
@@ -341,21 +355,20 @@ def six_task_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
 
 
 def test_readme_six_task_counts_match_the_campaign_summary():
-    records = load([SIX_TASKS_SUMMARY])
-    readme = README.read_text()
-    assert six_task_errors(readme, records) == []
-    for old, new in (
-        ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
-        ("on `add_condiment`,", "on `select_apple`,"),  # OmniD, DP and ACT are above theirs there
-        ("and `texas_holdem` none", "and `select_apple` none"),  # the list's last task is checked too
-        ("OmniD 51/180 vs DP 34/180", "OmniD 51/180 vs DP 33/180"),
-        ("(p = 0.026), ACT", "(p = 0.26), ACT"),
-        ("vs 2/30, 7/30, 14/30", "vs 2/30, 7/30, 13/30"),  # the second task's sentence is checked too
-        ("controls: OmniD, ACT)", "controls: OmniD, ACT, VQ-BeT)"),  # VQ-BeT's blind does as well
-        ("controls: OmniD, ACT)", "controls: OmniD)"),
-    ):
-        edited = readme.replace(old, new)
-        assert edited != readme and six_task_errors(edited, records) != []
+    assert_each_edit_is_caught(
+        six_task_errors,
+        load([SIX_TASKS_SUMMARY]),
+        (
+            ("ID 25/30 vs 13/30, 7/30, 6/30", "ID 25/30 vs 12/30, 7/30, 6/30"),
+            ("on `add_condiment`,", "on `select_apple`,"),  # OmniD, DP and ACT are above theirs there
+            ("and `texas_holdem` none", "and `select_apple` none"),  # the list's last task is checked too
+            ("OmniD 51/180 vs DP 34/180", "OmniD 51/180 vs DP 33/180"),
+            ("(p = 0.026), ACT", "(p = 0.26), ACT"),
+            ("vs 2/30, 7/30, 14/30", "vs 2/30, 7/30, 13/30"),  # the second task's sentence is checked too
+            ("controls: OmniD, ACT)", "controls: OmniD, ACT, VQ-BeT)"),  # VQ-BeT's blind does as well
+            ("controls: OmniD, ACT)", "controls: OmniD)"),
+        ),
+    )
 
 
 MULTITASK_SENTENCE = (
@@ -395,19 +408,18 @@ def multitask_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
 
 
 def test_readme_multitask_counts_match_the_campaign_summary():
-    records = load([SIX_TASKS_SUMMARY])
-    readme = README.read_text()
-    assert multitask_errors(readme, records) == []
-    for old, new in (
-        ("78/180 (blind", "79/180 (blind"),
-        ("(blind 12/180)", "(blind 9/180)"),
-        ("models' 51/180", "models' 34/180"),
-        ("51/180 (p = 0.0016)", "51/180 (p = 0.026)"),
-        ("(14000 steps)", "(3000 steps)"),
-        ("one OmniD for all", "one OmniD for every"),  # OmniD's sentence gone
-    ):
-        edited = readme.replace(old, new)
-        assert edited != readme and multitask_errors(edited, records) != []
+    assert_each_edit_is_caught(
+        multitask_errors,
+        load([SIX_TASKS_SUMMARY]),
+        (
+            ("78/180 (blind", "79/180 (blind"),
+            ("(blind 12/180)", "(blind 9/180)"),
+            ("models' 51/180", "models' 34/180"),
+            ("51/180 (p = 0.0016)", "51/180 (p = 0.026)"),
+            ("(14000 steps)", "(3000 steps)"),
+            ("one OmniD for all", "one OmniD for every"),  # OmniD's sentence gone
+        ),
+    )
 
 
 NEW_CAMERA_SUMMARIES = ("new-camera_seed1000_cpu2.json", "new-camera_seed1001_cpu2.json")
@@ -452,16 +464,15 @@ def new_camera_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
 
 
 def test_readme_new_camera_counts_match_the_test_summaries():
-    records = load(NEW_CAMERA_SUMMARIES)
-    readme = README.read_text()
-    assert new_camera_errors(readme, records) == []
-    for old, new in (
-        ("with 1000 steps OmniD 23/60", "with 1000 steps OmniD 24/60"),
-        ("OmniD above its blind control (11/60", "OmniD above its blind control (10/60"),
-        ("zero-shot OmniD 0/60, DP 1/60", "zero-shot OmniD 1/60, DP 1/60"),
-    ):
-        edited = readme.replace(old, new)
-        assert edited != readme and new_camera_errors(edited, records) != []
+    assert_each_edit_is_caught(
+        new_camera_errors,
+        load(NEW_CAMERA_SUMMARIES),
+        (
+            ("with 1000 steps OmniD 23/60", "with 1000 steps OmniD 24/60"),
+            ("OmniD above its blind control (11/60", "OmniD above its blind control (10/60"),
+            ("zero-shot OmniD 0/60, DP 1/60", "zero-shot OmniD 1/60, DP 1/60"),
+        ),
+    )
 
 
 CALIBRATION_DRAWS_SUMMARY = "calibration_draws_cpu2.json"
@@ -492,15 +503,14 @@ def many_draw_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
 
 
 def test_readme_many_draw_counts_match_their_summary():
-    records = read_run_summary(SUMMARIES / CALIBRATION_DRAWS_SUMMARY, robustness.PROTOCOL).evaluations
-    readme = README.read_text()
-    assert many_draw_errors(readme, records) == []
-    for old, new in (
-        ("79, 77 and 79 of 100", "79, 78 and 79 of 100"),
-        ("at 1, 2 and 4 cm", "at 1, 2 and 3 cm"),
-    ):
-        edited = readme.replace(old, new)
-        assert edited != readme and many_draw_errors(edited, records) != []
+    assert_each_edit_is_caught(
+        many_draw_errors,
+        read_run_summary(SUMMARIES / CALIBRATION_DRAWS_SUMMARY, robustness.PROTOCOL).evaluations,
+        (
+            ("79, 77 and 79 of 100", "79, 78 and 79 of 100"),
+            ("at 1, 2 and 4 cm", "at 1, 2 and 3 cm"),
+        ),
+    )
 
 
 @pytest.fixture(scope="module")
