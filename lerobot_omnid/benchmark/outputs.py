@@ -469,8 +469,10 @@ def write_outputs(
         for r in runs
         if r.kind == "offline" and r.train_seed == first_seed and is_done(r)
     }
+    measured = {model for model, _, _ in cells}
+    charted = [model for m in methods for model in (m, m + MULTITASK) if model in measured]
     chart = charts.bar_chart(
-        cells, methods, tasks, TASK0, TASK1, BACKGROUND_OODS, labels, out / "benchmark.png"
+        cells, charted, tasks, TASK0, TASK1, BACKGROUND_OODS, labels, out / "benchmark.png"
     )
     lines = ["# OmniD benchmark: OmniD vs DP, ACT, VQ-BeT", "", *settings_markdown(p, tasks), ""]
     if also:

@@ -3,6 +3,7 @@ and the position-shift curve (success against the object's distance outside the 
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
@@ -39,9 +40,52 @@ def error_bars(cells: Sequence[CellResult]) -> list[list[float]]:
     ]
 
 
+Group = tuple[str, str, str]
+"""A bar group: its x label, task and setting."""
+Panel = tuple[str, list[Group], list[str]]
+"""A bar panel: its title, its groups and its series (models)."""
+
+
+def bar_panels(
+    results: Mapping[Key, CellResult],
+    models: Sequence[str],
+    tasks: Sequence[str],
+    task0: str,
+    task1: str,
+    backgrounds: Sequence[str],
+) -> list[Panel]:
+    """The grouped panels of the bar chart: ID per task; task-0 generalisation and few-shot. Each keeps
+    only the groups some model has a result in and the models with a result in one of them; a panel with
+    nothing left is dropped, so a profile's chart shows what it measured and no empty axes."""
+    panels: list[Panel] = [
+        ("ID success, cameras B-E", [(task_title(t), t, "id") for t in tasks], list(models)),
+        (
+            f"{task_title(task0)}: generalisation and few-shot on camera A",
+            [("ID", task0, "id"), ("Pos. OOD", task0, "position_ood")]
+            + [(f"BG {b}", task0, b) for b in backgrounds]
+            + [("FT 0-A", task0, "fewshot_a"), ("FT 1-A", task1, "fewshot_a")],
+            list(models),
+        ),
+    ]
+    kept: list[Panel] = []
+    for title, groups, rows in panels:
+        groups = [g for g in groups if any((m, g[1], g[2]) in results for m in rows)]
+        rows = [m for m in rows if any((m, t, s) in results for _, t, s in groups)]
+        if groups:
+            kept.append((title, groups, rows))
+    return kept
+
+
+def ablation_bars(results: Mapping[Key, CellResult], task0: str) -> list[tuple[str, str]]:
+    """(column title, model) of the ablation's models with a task-0 ID result, or none when fewer than two
+    of them have one (one bar compares nothing)."""
+    found = [(title, model) for title, model, _ in ABLATION_COLUMNS if (model, task0, "id") in results]
+    return found if len(found) > 1 else []
+
+
 def bar_chart(
     results: Mapping[Key, CellResult],
-    methods: Sequence[str],
+    models: Sequence[str],
     tasks: Sequence[str],
     task0: str,
     task1: str,
@@ -49,20 +93,11 @@ def bar_chart(
     labels: Mapping[str, str],
     path: Path,
 ) -> Path:
-    """Grouped bars of success (%) with Wilson intervals: ID per task; task-0 generalisation; ablation."""
+    """Grouped bars of success (%) with Wilson intervals: the :func:`bar_panels`, then the ablation."""
     plt = pyplot()
-    panels = [
-        ("ID success, cameras B-E", [(task_title(t), t, "id") for t in tasks], methods),
-        (
-            f"{task_title(task0)}: generalisation and few-shot on camera A",
-            [("ID", task0, "id"), ("Pos. OOD", task0, "position_ood")]
-            + [(f"BG {b}", task0, b) for b in backgrounds]
-            + [("FT 0-A", task0, "fewshot_a"), ("FT 1-A", task1, "fewshot_a")],
-            methods,
-        ),
-    ]
-    ablation = [(title, model) for title, model, _ in ABLATION_COLUMNS if (model, task0, "id") in results]
-    n_axes = len(panels) + bool(ablation)
+    panels = bar_panels(results, models, tasks, task0, task1, backgrounds)
+    ablation = ablation_bars(results, task0)
+    n_axes = max(len(panels) + bool(ablation), 1)
     fig, axes = plt.subplots(n_axes, 1, figsize=(11, 3.2 * n_axes), squeeze=False)
     axes = axes[:, 0]
     for ax, (title, groups, rows) in zip(axes, panels, strict=False):
@@ -74,7 +109,7 @@ def bar_chart(
             ax.bar(
                 xs, [c.rate for c in cells], width, yerr=error_bars(cells), capsize=2, label=labels.get(m, m)
             )
-        ax.set_xticks(range(len(groups)), [name for name, _, _ in groups])
+        ax.set_xticks(range(len(groups)), [textwrap.fill(name, 16) for name, _, _ in groups])
         ax.set(title=title, ylabel="success (%)", ylim=(0, 105))
         ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
     if ablation:

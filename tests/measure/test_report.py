@@ -12,7 +12,7 @@ import pytest
 from lerobot_omnid.benchmark.methods import CONTROL_LABELS, CONTROLS
 from lerobot_omnid.benchmark.outputs import BANDS_CM
 from lerobot_omnid.benchmark.plan import BANDS, LABELS, SETTINGS, TASK0, TASK1, TRAIN_SEED, control_setting
-from lerobot_omnid.measure.charts import bar_chart, position_curve_chart
+from lerobot_omnid.measure.charts import ablation_bars, bar_chart, bar_panels, position_curve_chart
 from lerobot_omnid.measure.report import (
     ablation_table,
     comparison_table,
@@ -101,6 +101,48 @@ def test_report_tables_pool_seeds_and_match_the_paper_layout(tmp_path):
         LABELS,
         tmp_path / "chart" / "b.png",
     )
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bar_panels_show_what_was_measured_and_no_empty_axes(tmp_path):
+    """Groups no model has a result in, models with no result in a panel, a panel with nothing left and an
+    ablation of one model are left out; a multi-task model passed among the models gets its bars."""
+    records = _records(
+        tmp_path,
+        [
+            (("omnid", TASK0, "id"), 1, 50.0, 10),
+            (("omnid", TASK1, "id"), 1, 10.0, 10),
+            (("omnid_multitask", TASK0, "id"), 1, 40.0, 10),
+            (("diffusion", TASK1, "id"), 1, 20.0, 10),
+            (("diffusion", TASK0, "ood2"), 1, 30.0, 10),
+        ],
+    )
+    results = collect(records)
+    models = ("omnid", "omnid_multitask", "diffusion", "act")
+    oods = ("ood1", "ood2")
+    panels = bar_panels(results, models, (TASK0, TASK1), TASK0, TASK1, oods)
+    assert panels == [
+        (
+            "ID success, cameras B-E",
+            [("Select Apple", TASK0, "id"), ("Select Chemistry Tube", TASK1, "id")],
+            ["omnid", "omnid_multitask", "diffusion"],
+        ),
+        (
+            "Select Apple: generalisation and few-shot on camera A",
+            [("ID", TASK0, "id"), ("BG ood2", TASK0, "ood2")],
+            ["omnid", "omnid_multitask", "diffusion"],
+        ),
+    ]
+    only_id = collect([r for r in records if r.key[2] == "id" and r.key[1] == TASK1])
+    assert [title for title, _, _ in bar_panels(only_id, models, (TASK0, TASK1), TASK0, TASK1, oods)] == [
+        "ID success, cameras B-E"
+    ]
+    assert ablation_bars(results, TASK0) == []  # the base model alone
+    with_ablation = collect(
+        [*records, *_records(tmp_path / "a", [(("omnid_no_ofg", TASK0, "id"), 1, 0.0, 10)])]
+    )
+    assert [model for _, model in ablation_bars(with_ablation, TASK0)] == ["omnid_no_ofg", "omnid"]
+    png = bar_chart(with_ablation, models, (TASK0, TASK1), TASK0, TASK1, oods, LABELS, tmp_path / "b.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
