@@ -19,7 +19,7 @@ Diffusion Policy paper's MetaWorld protocol where a CPU allows:
    3 seeds, MetaWorld v2, 84 px, one camera) only beside them, labelled as such.
 
 Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``
-and ``<out>/summary.json``; ``--report-only --summary FILE...`` rebuilds the report from such summaries
+(with its chart ``metaworld.png``) and ``<out>/summary.json``; ``--report-only --summary FILE...`` rebuilds the report from such summaries
 alone, merged: a run split by ``--tasks`` over several folders or machines is reported as one.
 
     MUJOCO_GL=egl python -m lerobot_omnid.benchmark.metaworld_comparison --out outputs/metaworld
@@ -28,7 +28,7 @@ alone, merged: a run split by ``--tasks`` over several folders or machines is re
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from gym_omnid.metaworld_suite import DEFAULT_CAMERAS, FIXED_CAMERAS, STATE_DIM
@@ -37,6 +37,8 @@ from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import input_features, method_flags
 from lerobot_omnid.benchmark.plan import MINI, TRAIN_SEED
 from lerobot_omnid.cli import add_protocol_options
+from lerobot_omnid.measure.across_tasks import NOT_ABOVE_BLIND, pooled_comparison, task_table
+from lerobot_omnid.measure.charts import draw_panel, pyplot, save_figure
 from lerobot_omnid.measure.engine import (
     CHECKPOINT,
     Run,
@@ -46,13 +48,15 @@ from lerobot_omnid.measure.engine import (
     report_from_summary,
     run_protocol,
 )
-from lerobot_omnid.measure.report import format_counts, write_markdown
+from lerobot_omnid.measure.report import MISSING, format_rate, markdown_table, write_markdown
 from lerobot_omnid.measure.results import (
     SUMMARY,
+    CellResult,
+    Key,
     RunSummary,
+    collect,
     write_run_summary,
 )
-from lerobot_omnid.measure.stats import fisher_exact
 
 TASKS = ("assembly-v3", "disassemble-v3", "stick-push-v3", "push-v3", "pick-place-wall-v3")
 PROTOCOL = "metaworld_comparison"
@@ -77,7 +81,8 @@ MODELS = {  # name: (LeRobot policy type, cameras)
     "dp": ("diffusion", DEFAULT_CAMERAS),
     "dp_corner2": ("diffusion", ("corner2",)),
 }
-COMPARED = (("omnid", "dp"), ("omnid", "dp_corner2"), ("omnid", "omnid_fixed"))
+LABELS = {"omnid": "OmniD", "omnid_fixed": "OmniD, fixed cameras", "dp": "DP", "dp_corner2": "DP, corner2"}
+CHART = "metaworld.png"
 
 
 def data_dir(out: Path, task: str) -> Path:
@@ -170,47 +175,83 @@ def summarise(runs: Sequence[Run], commit: str | None = None) -> RunSummary:
 
 
 def write_report(summary: RunSummary, path: Path) -> None:
-    """``report.md``: per task and model the success pooled over the test ranges (each range too), its
-    blind control, Fisher p of OmniD against the others, the published numbers beside."""
-    cells: dict[tuple[str, str, str], dict[int, tuple[int, int]]] = {}
-    for r in summary.evaluations:
-        cells.setdefault((r.key[0], r.key[1], r.control), {})[r.eval_seed] = (r.successes, r.episodes)
-    settings, published = summary.settings, summary.results["published"]
-
-    def pooled(model: str, task: str, control: str = "") -> tuple[int, int] | None:
-        found = cells.get((model, task, control))
-        return (sum(s for s, _ in found.values()), sum(n for _, n in found.values())) if found else None
-
-    models = [m for m in MODELS if any(k[0] == m for k in cells)]
-    tasks = [t for t in PUBLISHED if any(k[1] == t for k in cells)]
+    """``report.md`` and its chart ``metaworld.png`` beside it: per task and model the success pooled over
+    the test ranges and in each, its blind control (cells not above it marked), OmniD's difference to each
+    model with Fisher p and, pooled over the tasks, Mantel-Haenszel p and the tasks' heterogeneity; then
+    ours beside the published numbers, per task and their mean."""
+    records, settings = summary.evaluations, summary.settings
+    models = [m for m in MODELS if any(r.key[0] == m for r in records)]
+    tasks = [t for t in PUBLISHED if any(r.key[1] == t for r in records)]
     lines = [
         "# MetaWorld: OmniD against LeRobot's DP (final checkpoint), published numbers beside",
         "",
         f"{settings['demonstrations']} demonstrations per task, {settings['image_size']} px, "
         f"{settings['steps']} training steps, episodes of at most {settings['episode_length']} steps; test "
-        f"env seeds from {', '.join(map(str, settings['test_seeds']))} (per range: second table). Published: "
-        "DP3 paper, best 5 evaluations of 3 training seeds, MetaWorld v2, one 84 px camera (not ours).",
+        f"env seeds from {', '.join(map(str, settings['test_seeds']))} (the ranges). Cells: success (%) with "
+        f"its Wilson 95 % interval; {NOT_ABOVE_BLIND}: not above its blind control (every camera black).",
         "",
-        "| task | " + " | ".join(f"{m} | {m} blind" for m in models) + " | published DP3 | published DP |",
-        "|---|" + "---|" * (2 * len(models) + 2),
+        *task_table(
+            records, models, tasks, LABELS, base="omnid" if "omnid" in models else None, controls=("blind",)
+        ),
     ]
-    for task in tasks:
-        row = [
-            f"{format_counts(pooled(m, task))} | {format_counts(pooled(m, task, 'blind'))}" for m in models
+    if "omnid" in models and len(models) > 1 and len(tasks) > 1:
+        lines += [
+            "",
+            "OmniD against each model over the tasks:",
+            "",
+            *pooled_comparison(records, models, tasks, LABELS),
         ]
-        dp3, dp = published[task]
-        lines.append(f"| {task} | " + " | ".join(row) + f" | {dp3} % | {dp} % |")
-    lines += ["", "| task | env seeds | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
-    for task in tasks:
-        for seed in settings["test_seeds"]:
-            row = [format_counts(cells.get((m, task, ""), {}).get(seed)) for m in models]
-            lines.append(f"| {task} | from {seed} | " + " | ".join(row) + " |")
-    lines += ["", "| task | comparison | Fisher p |", "|---|---|---|"]
-    for task in tasks:
-        for a, b in COMPARED:
-            if (ca := pooled(a, task)) and (cb := pooled(b, task)):
-                lines.append(f"| {task} | {a} vs {b} | {fisher_exact(*ca, *cb):.3g} |")
+    lines += ["", *published_table(collect(records), models, tasks, summary.results["published"])]
+    lines += ["", f"![success per task, published image DP marked]({CHART})"]
     write_markdown(lines, path)
+    chart(collect(records), models, tasks, summary.results["published"], path.parent / CHART)
+
+
+def published_table(
+    cells: Mapping[Key, CellResult], models: Sequence[str], tasks: Sequence[str], published: Mapping
+) -> list[str]:
+    """Ours (the final checkpoint, mean of final) beside the published (best 5 evaluations of 3 seeds,
+    MetaWorld v2, one 84 px camera) success (%), per task and the mean over ``tasks``."""
+    rows = []
+    for task in tasks:
+        ours = [format_rate(c) if (c := cells.get((m, task, "id"))) else MISSING for m in models]
+        rows.append([task, *ours, *(f"{v}" for v in published[task])])
+    if len(tasks) > 1:
+        means = []
+        for m in models:
+            found = [cells[(m, t, "id")].rate for t in tasks if (m, t, "id") in cells]
+            means.append(f"{sum(found) / len(found):.1f}" + ("" if len(found) == len(tasks) else "*"))
+        rows.append(
+            [
+                f"mean of {len(tasks)}",
+                *means,
+                *(f"{sum(published[t][i] for t in tasks) / len(tasks):.1f}" for i in (0, 1)),
+            ]
+        )
+    header = ["Task: success (%)", *(f"{LABELS[m]}, ours" for m in models)]
+    header += ["DP3, published", "image DP, published"]
+    return markdown_table(header, rows)
+
+
+def chart(
+    cells: Mapping[Key, CellResult],
+    models: Sequence[str],
+    tasks: Sequence[str],
+    published: Mapping,
+    path: Path,
+) -> Path:
+    """Bars of each model's success per task with Wilson intervals; the published image DP's as a dashed
+    line over its task (another protocol: orientation, not comparison)."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(11, 3.6))
+    draw_panel(
+        ax, ("MetaWorld, final checkpoint", [(t, t, "id") for t in tasks], list(models)), cells, LABELS
+    )
+    for i, task in enumerate(tasks):
+        label = "image DP, published (v2, best 5 of 3 seeds)" if i == 0 else None
+        ax.plot([i - 0.45, i + 0.45], [published[task][1]] * 2, "k--", linewidth=1, label=label)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    return save_figure(fig, path)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -83,6 +83,21 @@ def ablation_bars(results: Mapping[Key, CellResult], task0: str) -> list[tuple[s
     return found if len(found) > 1 else []
 
 
+def draw_panel(ax: Any, panel: Panel, results: Mapping[Key, CellResult], labels: Mapping[str, str]) -> None:
+    """One :data:`Panel` on the axes ``ax``: per group a bar for each model with a result, with its Wilson
+    interval, x positions 0, 1, ... by group; the legend outside on the right."""
+    title, groups, rows = panel
+    width = 0.8 / max(len(rows), 1)
+    for i, m in enumerate(rows):
+        found = [(g, results[(m, t, s)]) for g, (_, t, s) in enumerate(groups) if (m, t, s) in results]
+        xs = [g + (i - (len(rows) - 1) / 2) * width for g, _ in found]
+        cells = [c for _, c in found]
+        ax.bar(xs, [c.rate for c in cells], width, yerr=error_bars(cells), capsize=2, label=labels.get(m, m))
+    ax.set_xticks(range(len(groups)), [textwrap.fill(name, 16) for name, _, _ in groups])
+    ax.set(title=title, ylabel="success (%)", ylim=(0, 105))
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+
+
 def bar_chart(
     results: Mapping[Key, CellResult],
     models: Sequence[str],
@@ -100,18 +115,8 @@ def bar_chart(
     n_axes = max(len(panels) + bool(ablation), 1)
     fig, axes = plt.subplots(n_axes, 1, figsize=(11, 3.2 * n_axes), squeeze=False)
     axes = axes[:, 0]
-    for ax, (title, groups, rows) in zip(axes, panels, strict=False):
-        width = 0.8 / max(len(rows), 1)
-        for i, m in enumerate(rows):
-            found = [(g, results[(m, t, s)]) for g, (_, t, s) in enumerate(groups) if (m, t, s) in results]
-            xs = [g + (i - (len(rows) - 1) / 2) * width for g, _ in found]
-            cells = [c for _, c in found]
-            ax.bar(
-                xs, [c.rate for c in cells], width, yerr=error_bars(cells), capsize=2, label=labels.get(m, m)
-            )
-        ax.set_xticks(range(len(groups)), [textwrap.fill(name, 16) for name, _, _ in groups])
-        ax.set(title=title, ylabel="success (%)", ylim=(0, 105))
-        ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    for ax, panel in zip(axes, panels, strict=False):
+        draw_panel(ax, panel, results, labels)
     if ablation:
         ax = axes[-1]
         cells = [results[(m, task0, "id")] for _, m in ablation]

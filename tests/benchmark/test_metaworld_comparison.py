@@ -81,10 +81,14 @@ def test_report_pools_the_ranges_and_puts_the_published_numbers_beside(tmp_path,
     source = write_run_summary(tmp_path / "summary.json", mw.summarise(runs))
     assert mw.main(["--out", str(tmp_path / "rebuilt"), "--report-only", "--summary", str(source)]) == 0
     report = (tmp_path / "rebuilt" / "report.md").read_text()
-    assert "| push-v3 | 24/30 (62.7-90.5 %) | 2/30 (1.8-21.3 %) | 12/30 (24.6-57.7 %) | 0/30" in report
-    assert "| 51 % | 30 % |" in report  # the published DP3 and DP, beside
-    assert "| push-v3 | from 2000 | 12/15" in report
-    assert "| push-v3 | omnid vs dp | 0.00" in report
+    # Pooled over the ranges, each range, the blind control; OmniD's difference to DP and Fisher's p.
+    assert (
+        "| push-v3 | OmniD | 80.0 (62.7-90.5) | 12/15 (54.8-93.0 %) | 12/15 (54.8-93.0 %) | 2/30 (" in report
+    )
+    assert "| push-v3 | DP | 40.0 (24.6-57.7) | 6/15 (19.8-64.3 %) | 6/15 (19.8-64.3 %) | 0/30" in report
+    assert "| +40.0 (+15.3 to +58.6) | 0.0033 |" in report
+    assert "| push-v3 | 80.0 (62.7-90.5) | 40.0 (24.6-57.7) | 51 | 30 |" in report  # published DP3, DP beside
+    assert (tmp_path / "rebuilt" / mw.CHART).stat().st_size > 0
 
 
 def test_a_run_split_by_task_is_reported_as_one(tmp_path):
@@ -102,7 +106,10 @@ def test_a_run_split_by_task_is_reported_as_one(tmp_path):
         sources.append(str(write_run_summary(out / "summary.json", mw.summarise(runs))))
     assert mw.main(["--out", str(tmp_path / "rebuilt"), "--report-only", "--summary", *sources]) == 0
     report = (tmp_path / "rebuilt" / "report.md").read_text()
-    assert "| assembly-v3 | 8/30" in report and "| push-v3 | 18/30" in report
+    assert "| assembly-v3 | OmniD | 26.7 (14.2-44.4) † | 4/15" in report  # 8/30, as its blind control
+    assert "| push-v3 | OmniD | 60.0 (42.3-75.4) † | 9/15" in report
+    assert "| **pooled, 2 tasks** | OmniD | 43.3 (31.6-55.9) † |" in report
+    assert "| mean of 2 | 43.3 | 75.0 | 22.5 |" in report  # the published means over the same tasks
     with pytest.raises(SystemExit):  # the same part twice would count its episodes twice
         mw.main(["--out", str(tmp_path / "twice"), "--report-only", "--summary", sources[0], sources[0]])
 
