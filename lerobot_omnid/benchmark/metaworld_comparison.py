@@ -19,8 +19,9 @@ Diffusion Policy paper's MetaWorld protocol where a CPU allows:
    3 seeds, MetaWorld v2, 84 px, one camera) only beside them, labelled as such.
 
 Runs on the experiment engine (resumable; ``--dry-run`` prints every command); writes ``<out>/report.md``
-(with its chart ``metaworld.png``) and ``<out>/summary.json``; ``--report-only --summary FILE...`` rebuilds the report from such summaries
-alone, merged: a run split by ``--tasks`` over several folders or machines is reported as one.
+(with its chart ``metaworld.png``) and ``<out>/summary.json``; ``--report-only --summary FILE...``
+rebuilds the report from such summaries alone, merged: a run split by ``--tasks`` over several folders or
+machines is reported as one.
 
     MUJOCO_GL=egl python -m lerobot_omnid.benchmark.metaworld_comparison --out outputs/metaworld
 """

@@ -11,7 +11,9 @@ frame index, hence a similar arm pose, but the objects elsewhere), the state bei
 Reported, for the action ``--ahead`` steps into the first chunk: the TCP position error (cm) against the
 expert's action with its own and with the swapped images, and the mean distance between the two
 predictions. A policy whose prediction does not move when the images are swapped acts from the state
-alone. Works for any LeRobot policy trained on a gym_omnid dataset.
+alone. Works for any LeRobot policy trained on a dataset recorded by ``omnid-record`` (cameras calibrated
+per frame included); the errors are in cm where the action's first three values are a position in m
+(gym_omnid), in hundredths of the action's units otherwise (MetaWorld's position deltas).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
-from lerobot.utils.constants import ACTION, OBS_STATE
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_PREFIX
 
 from lerobot_omnid.diagnostics.checkpoints import POSITION, load_policy
 
@@ -30,10 +32,15 @@ from lerobot_omnid.diagnostics.checkpoints import POSITION, load_policy
 def chunk_action(
     policy, preprocessor, postprocessor, images: dict, state_item: dict, ahead: int
 ) -> np.ndarray:
-    """Action ``ahead`` steps into the first chunk predicted from ``images`` and ``state_item``'s state."""
+    """Action ``ahead`` steps into the first chunk predicted from ``images`` and the rest of ``state_item``'s
+    observation: its state and, where the cameras are calibrated per frame, its calibration columns."""
     policy.reset()
-    observation = {key: value.unsqueeze(0) for key, value in images.items()}
-    observation[OBS_STATE] = state_item[OBS_STATE].unsqueeze(0)
+    observation = {
+        key: value.unsqueeze(0)
+        for key, value in state_item.items()
+        if key.startswith(OBS_PREFIX) and not key.startswith(OBS_IMAGES)
+    }
+    observation.update({key: value.unsqueeze(0) for key, value in images.items()})
     observation["task"] = [state_item["task"]]
     torch.manual_seed(0)  # the same diffusion noise for both calls
     with torch.inference_mode():
