@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_omnid.benchmark import robustness
+from lerobot_omnid.benchmark import metaworld_comparison, robustness
 from lerobot_omnid.measure.across_tasks import above
 from lerobot_omnid.measure.results import (
     CellResult,
@@ -28,6 +28,7 @@ from lerobot_omnid.measure.results import (
     check_comparable,
     collect,
     merge,
+    merge_run_summaries,
     read_run_summary,
     read_summary,
 )
@@ -532,6 +533,67 @@ def test_readme_many_draw_counts_match_their_summary():
             ("at 1, 2 and 4 cm", "at 1, 2 and 3 cm"),
         ),
     )
+
+
+METAWORLD_SUMMARIES = tuple(sorted(p.name for p in SUMMARIES.glob("metaworld_*_cpu2.json")))
+"""The MetaWorld comparison, one file per task: docs/results.md's "MetaWorld" rebuild command merges these."""
+METAWORLD_SENTENCE = (
+    r"MetaWorld\]\([^)]*\) \((\d) of 5 tasks[^)]*\): OmniD (\d+)/(\d+) vs DP (\d+)/(\d+) "
+    r"on the same four cameras \(p = ([\d.<\s]+)\), DP on `corner2` alone (\d+)/(\d+) "
+    r"\(the published image DP's (\d+(?:\.\d+)?) % "
+    r"on another protocol\), OmniD without the hand camera (\d+)/(\d+)"
+)
+"""The headline's MetaWorld sentence: tasks measured, OmniD's and DP's (four cameras) counts over them and
+their p (Fisher for one task, Mantel-Haenszel by task for several), DP on ``corner2``, the published image
+DP's mean over the same tasks, OmniD on the fixed cameras."""
+
+
+def metaworld_errors(readme: str, records: Sequence[EvalRecord]) -> list[str]:
+    """The headline's MetaWorld counts against the per-task summaries."""
+    errors: list[str] = []
+    if m := claim(" ".join(headline_section(readme).split()), METAWORLD_SENTENCE, errors):
+        cells = collect(records)
+        tasks = sorted({t for _, t, _ in cells})
+        models = ("omnid", "dp", "dp_corner2", "omnid_fixed")
+        totals = {
+            model: [sum(astuple(cells[(model, t, "id")])[i] for t in tasks) for i in (0, 1)]
+            for model in models
+        }
+        truth = [len(tasks), *totals["omnid"], *totals["dp"], *totals["dp_corner2"], *totals["omnid_fixed"]]
+        stated = [int(m[i]) for i in (1, 2, 3, 4, 5, 7, 8, 10, 11)]
+        if stated != truth:
+            errors.append(f"headline: MetaWorld stated {stated}, the summaries give {truth}")
+        strata = [
+            (*astuple(cells[("omnid", t, "id")])[:2], *astuple(cells[("dp", t, "id")])[:2]) for t in tasks
+        ]
+        p = fisher_exact(*strata[0]) if len(strata) == 1 else mantel_haenszel(strata)
+        errors += p_errors("headline: MetaWorld OmniD - DP p", m[6], p)
+        published = sum(metaworld_comparison.PUBLISHED[t][1] for t in tasks) / len(tasks)
+        if abs(float(m[9]) - published) > 0.05:
+            errors.append(
+                f"headline: MetaWorld published image DP {m[9]} %, the mean over {tasks} is {published}"
+            )
+    return errors
+
+
+METAWORLD_EDITS = (
+    ("(1 of 5 tasks", "(2 of 5 tasks"),
+    ("OmniD 4/30 vs DP", "OmniD 5/30 vs DP"),
+    ("vs DP 10/30 on", "vs DP 11/30 on"),
+    ("four cameras (p = 0.13)", "four cameras (p = 0.013)"),
+    ("alone 7/30", "alone 8/30"),
+    ("image DP's 30 %", "image DP's 51 %"),
+    ("hand camera 5/30", "hand camera 6/30"),
+)
+
+
+def test_readme_metaworld_counts_match_the_task_summaries():
+    parts = [
+        read_run_summary(SUMMARIES / name, metaworld_comparison.PROTOCOL) for name in METAWORLD_SUMMARIES
+    ]
+    assert parts, "no MetaWorld summary under docs/results/"
+    records = merge_run_summaries(parts, METAWORLD_SUMMARIES).evaluations
+    assert_each_edit_is_caught(metaworld_errors, records, METAWORLD_EDITS)
 
 
 @pytest.fixture(scope="module")
