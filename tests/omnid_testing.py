@@ -266,3 +266,24 @@ def evaluation(out: Path, name: str, rate: str = "0", needs=(), inputs=()) -> Ru
     folder = out / name
     cmd = (sys.executable, "-c", WRITE_EVAL, str(folder), rate)
     return Run(name, "eval", cmd, folder, tuple(needs), inputs=tuple(inputs))
+
+
+def static_and_per_frame_twins(tmp_path: Path, cams: tuple[str, ...], episodes: int, frames: int):
+    """A tiny dataset under ``tmp_path / "static"`` (static calibration), its copy under
+    ``tmp_path / "columns"`` whose per-frame columns hold that calibration, and two OmniD policies with the
+    same weights, calibrated statically and per frame: the same predictions are expected from each on its
+    dataset. The plane enters the condition from the start, so that images and calibration move them.
+    Returns (dataset, the copy's root, static policy, per-frame policy)."""
+    from lerobot_omnid.calibration.attach_calibration import main as attach_calibration
+    from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
+
+    keys = [f"observation.images.{cam}" for cam in cams]
+    static_root, columns_root = tmp_path / "static", tmp_path / "columns"
+    dataset = make_tiny_dataset(static_root, cams=cams, size=32, episodes=episodes, frames=frames)
+    assert attach_calibration(["--root", str(static_root), "--per-frame-columns", str(columns_root)]) == 0
+    static = OmniDPolicy(tiny_config(cams, size=32, zero_init_compression=False))
+    per_frame = OmniDPolicy(
+        tiny_config(cams, size=32, zero_init_compression=False, camera_calibration={}, frame_calibration=keys)
+    )
+    per_frame.load_state_dict(static.state_dict())
+    return dataset, columns_root, static, per_frame

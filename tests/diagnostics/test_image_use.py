@@ -6,11 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from lerobot.policies import make_pre_post_processors
-from omnid_testing import make_tiny_dataset, tiny_config
+from omnid_testing import static_and_per_frame_twins
 
-from lerobot_omnid.calibration.attach_calibration import main as attach_calibration
 from lerobot_omnid.diagnostics.image_use import chunk_action
-from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
 
 def test_a_per_frame_policy_is_given_each_items_calibration_columns(tmp_path) -> None:
@@ -18,16 +16,10 @@ def test_a_per_frame_policy_is_given_each_items_calibration_columns(tmp_path) ->
     the same weights calibrated statically predict on the original; other images change the prediction."""
     cams = ("cam_b", "cam_c")
     keys = [f"observation.images.{cam}" for cam in cams]
-    static_root, columns_root = tmp_path / "static", tmp_path / "columns"
-    static_data = make_tiny_dataset(static_root, cams=cams, size=32, episodes=2, frames=5)
-    assert attach_calibration(["--root", str(static_root), "--per-frame-columns", str(columns_root)]) == 0
-    columns_data = type(static_data)(static_data.repo_id, root=columns_root)
-    # The plane enters the condition from the start, so that the images and calibration move the prediction.
-    static = OmniDPolicy(tiny_config(cams, size=32, zero_init_compression=False))
-    per_frame = OmniDPolicy(
-        tiny_config(cams, size=32, zero_init_compression=False, camera_calibration={}, frame_calibration=keys)
+    static_data, columns_root, static, per_frame = static_and_per_frame_twins(
+        tmp_path, cams, episodes=2, frames=5
     )
-    per_frame.load_state_dict(static.state_dict())
+    columns_data = type(static_data)(static_data.repo_id, root=columns_root)
 
     actions = {}
     for name, policy, data in (("static", static, static_data), ("per_frame", per_frame, columns_data)):

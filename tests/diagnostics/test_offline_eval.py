@@ -10,9 +10,8 @@ import pytest
 import torch
 from gym_omnid.rotations import rot6d_from_matrix, topdown_rotation
 from lerobot.policies import make_pre_post_processors
-from omnid_testing import make_tiny_dataset, tiny_config
+from omnid_testing import make_tiny_dataset, static_and_per_frame_twins, tiny_config
 
-from lerobot_omnid.calibration.attach_calibration import main as attach_calibration
 from lerobot_omnid.diagnostics.offline_eval import action_errors, evaluate_offline, main, rotation_angle_deg
 from lerobot_omnid.policy.modeling_omnid import OmniDPolicy
 
@@ -94,15 +93,10 @@ def test_a_per_frame_policy_reads_every_frames_calibration_columns(tmp_path) -> 
     weights calibrated statically on the original."""
     cams = ("cam_b", "cam_c")
     keys = [f"observation.images.{cam}" for cam in cams]
-    static_root, columns_root = tmp_path / "static", tmp_path / "columns"
-    dataset = make_tiny_dataset(static_root, cams=cams, size=32, episodes=1, frames=5)
-    assert attach_calibration(["--root", str(static_root), "--per-frame-columns", str(columns_root)]) == 0
-    # The plane enters the condition from the start, so that the calibration changes the predictions.
-    static = OmniDPolicy(tiny_config(cams, size=32, zero_init_compression=False))
-    per_frame = OmniDPolicy(
-        tiny_config(cams, size=32, zero_init_compression=False, camera_calibration={}, frame_calibration=keys)
+    dataset, columns_root, static, per_frame = static_and_per_frame_twins(
+        tmp_path, cams, episodes=1, frames=5
     )
-    per_frame.load_state_dict(static.state_dict())
+    static_root = tmp_path / "static"
 
     results = {}
     for name, policy, root in (("static", static, static_root), ("per_frame", per_frame, columns_root)):
