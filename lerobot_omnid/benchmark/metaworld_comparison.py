@@ -180,7 +180,8 @@ def write_report(summary: RunSummary, path: Path) -> None:
     the test ranges and in each, its blind control (cells not above it marked), OmniD's difference to each
     model with Fisher p and, pooled over the tasks, Mantel-Haenszel p and the tasks' heterogeneity; then
     ours beside the published numbers, per task and their mean."""
-    records, settings = summary.evaluations, summary.settings
+    records, settings, published = summary.evaluations, summary.settings, summary.results["published"]
+    cells = collect(records)
     models = [m for m in MODELS if any(r.key[0] == m for r in records)]
     tasks = [t for t in PUBLISHED if any(r.key[1] == t for r in records)]
     lines = [
@@ -202,10 +203,10 @@ def write_report(summary: RunSummary, path: Path) -> None:
             "",
             *pooled_comparison(records, models, tasks, LABELS),
         ]
-    lines += ["", *published_table(collect(records), models, tasks, summary.results["published"])]
+    lines += ["", *published_table(cells, models, tasks, published)]
     lines += ["", f"![success per task, published image DP marked]({CHART})"]
     write_markdown(lines, path)
-    chart(collect(records), models, tasks, summary.results["published"], path.parent / CHART)
+    chart(cells, models, tasks, published, path.parent / CHART)
 
 
 def published_table(

@@ -96,7 +96,7 @@ def test_a_per_frame_policy_reads_every_frames_calibration_columns(tmp_path) -> 
     dataset, columns_root, static, per_frame = static_and_per_frame_twins(
         tmp_path, cams, episodes=1, frames=5
     )
-    static_root = tmp_path / "static"
+    static_root = dataset.root
 
     results = {}
     for name, policy, root in (("static", static, static_root), ("per_frame", per_frame, columns_root)):
