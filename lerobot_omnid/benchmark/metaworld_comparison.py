@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from gym_omnid.metaworld_suite import DEFAULT_CAMERAS, FIXED_CAMERAS, STATE_DIM
@@ -76,90 +77,127 @@ TEST_SEEDS = (1000, 2000)  # two disjoint ranges of env seeds, reported apart an
 TEST_EPISODES = 15  # per range: 30 per cell
 VOLUME_BOUNDS = "[[-0.35,0.45],[0.35,0.95],[-0.05,0.35]]"  # MetaWorld's frame: x right, y forward, z up (m)
 VOLUME_SHAPE = "[16,12,8]"  # 5 cm cells
-MODELS = {  # name: (LeRobot policy type, cameras)
-    "omnid": ("omnid", DEFAULT_CAMERAS),
-    "omnid_fixed": ("omnid", FIXED_CAMERAS),
-    "dp": ("diffusion", DEFAULT_CAMERAS),
-    "dp_corner2": ("diffusion", ("corner2",)),
+BACKBONE_LAYER = 3  # OmniD's feature stage: mini's (stride 16, 4x4 maps at 64 px)
+
+
+@dataclass(frozen=True)
+class Model:
+    """What a model of a MetaWorld protocol is: its LeRobot policy type, its cameras, the image size of its
+    data and (OmniD) the last ResNet stage whose features it samples."""
+
+    policy: str
+    cameras: tuple[str, ...]
+    image_size: int = IMAGE_SIZE
+    backbone_layer: int = BACKBONE_LAYER
+
+
+MODELS = {
+    "omnid": Model("omnid", DEFAULT_CAMERAS),
+    "omnid_fixed": Model("omnid", FIXED_CAMERAS),
+    "dp": Model("diffusion", DEFAULT_CAMERAS),
+    "dp_corner2": Model("diffusion", ("corner2",)),
 }
 LABELS = {"omnid": "OmniD", "omnid_fixed": "OmniD, fixed cameras", "dp": "DP", "dp_corner2": "DP, corner2"}
 CHART = "metaworld.png"
 
 
-def data_dir(out: Path, task: str) -> Path:
-    return out / "data" / task
+def data_dir(out: Path, task: str, image_size: int = IMAGE_SIZE) -> Path:
+    """``task``'s demonstrations at ``image_size`` (the protocol's size in the plain folder)."""
+    return out / "data" / (task if image_size == IMAGE_SIZE else f"{task}_{image_size}px")
 
 
-def record(out: Path, task: str) -> list[str]:
-    root = data_dir(out, task)
+def record(out: Path, task: str, image_size: int = IMAGE_SIZE) -> list[str]:
+    root = data_dir(out, task, image_size)
     return [
         str(commands.BIN / "omnid-record"),
         *("--suite", "metaworld", "--task", task, "--episodes", str(DEMONSTRATIONS)),
-        *("--cameras", ",".join(DEFAULT_CAMERAS), "--image-size", str(IMAGE_SIZE), "--seed", "0"),
+        *("--cameras", ",".join(DEFAULT_CAMERAS), "--image-size", str(image_size), "--seed", "0"),
         *("--root", str(root), "--repo-id", f"local/{root.name}"),
     ]
 
 
-def train(out: Path, model: str, task: str) -> list[str]:
-    """``lerobot-train`` of ``model`` on ``task``'s demonstrations: mini's options, this suite's cameras,
-    state size and (OmniD) volume."""
-    policy, cameras = MODELS[model]
-    flags = [f"--policy.type={policy}", "--policy.device=cpu", "--policy.push_to_hub=false"]
-    for flag, _ in method_flags(policy, MINI):
-        name = flag.partition("=")[0]
-        if name in ("--policy.cameras", "--policy.volume_bounds", "--policy.volume_shape"):
+def train(out: Path, name: str, model: Model, task: str) -> list[str]:
+    """``lerobot-train`` of ``model`` (``name`` names its folder) on ``task``'s demonstrations: mini's
+    options, this suite's cameras, state size and (OmniD) volume and feature stage."""
+    flags = [f"--policy.type={model.policy}", "--policy.device=cpu", "--policy.push_to_hub=false"]
+    for flag, _ in method_flags(model.policy, MINI):
+        option = flag.partition("=")[0]
+        if option in ("--policy.cameras", "--policy.volume_bounds", "--policy.volume_shape"):
             continue
-        flags.append(flag)
-    if policy == "omnid":
-        flags += [f"--policy.cameras={commands.json_list(cameras)}"]
+        flags.append(f"{option}={model.backbone_layer}" if option == "--policy.backbone_layer" else flag)
+    if model.policy == "omnid":
+        flags += [f"--policy.cameras={commands.json_list(model.cameras)}"]
         flags += [f"--policy.volume_bounds={VOLUME_BOUNDS}", f"--policy.volume_shape={VOLUME_SHAPE}"]
     else:  # only the state and these images: the dataset's calibration columns are no input of DP
-        flags.append(f"--policy.input_features={input_features(cameras, IMAGE_SIZE, STATE_DIM)}")
+        features = input_features(model.cameras, model.image_size, STATE_DIM)
+        flags.append(f"--policy.input_features={features}")
     return commands.train_command(
-        data_dir(out, task), out / "train" / model / task, flags, STEPS, MINI.batch_size, seed=TRAIN_SEED
+        data_dir(out, task, model.image_size),
+        out / "train" / name / task,
+        flags,
+        STEPS,
+        MINI.batch_size,
+        seed=TRAIN_SEED,
     )
 
 
-def eval_dir(out: Path, model: str, task: str, seed: int, blind: bool) -> Path:
-    return out / ("eval_blind" if blind else "eval") / model / task / f"seed{seed}"
+def eval_dir(out: Path, name: str, task: str, seed: int, blind: bool, stage: str = "eval") -> Path:
+    """Where an evaluation of ``stage`` ("eval": the test; a validation names its own) is written."""
+    return out / (f"{stage}_blind" if blind else stage) / name / task / f"seed{seed}"
 
 
-def evaluate(out: Path, model: str, task: str, seed: int, blind: bool) -> list[str]:
-    cameras = MODELS[model][1]
+def evaluate(
+    out: Path, name: str, model: Model, task: str, seed: int, blind: bool, episodes: int, folder: Path
+) -> list[str]:
+    cameras = ",".join(model.cameras)
     cmd = [
         str(commands.BIN / "lerobot-eval"),
-        f"--policy.path={out / 'train' / model / task / CHECKPOINT}",
+        f"--policy.path={out / 'train' / name / task / CHECKPOINT}",
         "--policy.device=cpu",
         "--env.type=omnid_metaworld",
         f"--env.task={task}",
-        f"--env.cameras=[{','.join(cameras)}]",
-        f"--env.image_size={IMAGE_SIZE}",
+        f"--env.cameras=[{cameras}]",
+        f"--env.image_size={model.image_size}",
         f"--env.episode_length={EPISODE_LENGTH}",
-        f"--eval.n_episodes={TEST_EPISODES}",
+        f"--eval.n_episodes={episodes}",
         f"--eval.batch_size={MINI.eval_batch_size}",
         f"--seed={seed}",
-        f"--output_dir={eval_dir(out, model, task, seed, blind)}",
+        f"--output_dir={folder}",
     ]
-    return [*cmd, f"--env.blackout_cameras=[{','.join(cameras)}]"] if blind else cmd
+    return [*cmd, f"--env.blackout_cameras=[{cameras}]"] if blind else cmd
 
 
-def protocol(out: Path, tasks: Sequence[str], models: Sequence[str]) -> list[Run]:
-    """Per task: record, then per model train and evaluate (and its blind control) on every test range."""
+def protocol(
+    out: Path,
+    tasks: Sequence[str],
+    models: Mapping[str, Model],
+    seeds: Sequence[int] = TEST_SEEDS,
+    episodes: int = TEST_EPISODES,
+    stage: str = "eval",
+) -> list[Run]:
+    """Per task: record (once per image size), then per model train and evaluate (and its blind control)
+    on every range of ``episodes`` env seeds from each of ``seeds``."""
     runs: list[Run] = []
     for task in tasks:
-        recorded = Run(f"record/{task}", "record", tuple(record(out, task)), data_dir(out, task))
-        runs.append(recorded)
-        for model in models:
-            name = f"train/{model}/{task}"
-            output = out / "train" / model / task
-            runs.append(Run(name, "train", tuple(train(out, model, task)), output, (recorded.name,)))
-            for seed in TEST_SEEDS:
+        recorded = {}
+        for size in dict.fromkeys(m.image_size for m in models.values()):
+            folder = data_dir(out, task, size)
+            run = Run(f"record/{folder.name}", "record", tuple(record(out, task, size)), folder)
+            recorded[size] = run.name
+            runs.append(run)
+        for name, model in models.items():
+            trained = f"train/{name}/{task}"
+            cmd = tuple(train(out, name, model, task))
+            runs.append(
+                Run(trained, "train", cmd, out / "train" / name / task, (recorded[model.image_size],))
+            )
+            for seed in seeds:
                 for blind in (False, True):
-                    folder = eval_dir(out, model, task, seed, blind)
-                    cmd = tuple(evaluate(out, model, task, seed, blind))
-                    cell = {"result": (model, task, "id"), "seed": seed, "train_seed": TRAIN_SEED}
+                    folder = eval_dir(out, name, task, seed, blind, stage)
+                    cmd = tuple(evaluate(out, name, model, task, seed, blind, episodes, folder))
+                    cell = {"result": (name, task, "id"), "seed": seed, "train_seed": TRAIN_SEED}
                     cell["control"] = "blind" if blind else ""
-                    runs.append(Run(str(folder.relative_to(out)), "eval", cmd, folder, (name,), **cell))
+                    runs.append(Run(str(folder.relative_to(out)), "eval", cmd, folder, (trained,), **cell))
     return plan(runs, out)
 
 
@@ -273,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--tasks: expected names from {','.join(TASKS)}, got {','.join(unknown)}")
     if unknown := [m for m in models if m not in MODELS]:
         parser.error(f"--models: expected names from {','.join(MODELS)}, got {','.join(unknown)}")
-    runs = protocol(out, tasks, models)
+    runs = protocol(out, tasks, {m: MODELS[m] for m in models})
 
     commit = code_commit()
 

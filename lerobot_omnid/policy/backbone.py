@@ -112,7 +112,7 @@ class ResNetFeatures(nn.Module):
 
     Args:
         name: torchvision constructor name ("resnet18", ..., "resnet101").
-        backbone_layer: 2 (stride 8), 3 (stride 16) or 4 (stride 32).
+        backbone_layer: 1 (stride 4), 2 (stride 8), 3 (stride 16) or 4 (stride 32).
         use_group_norm: GroupNorm instead of BatchNorm.
         weights_path: optional pretrained weights, see :func:`resolve_backbone_weights`: a local
             torchvision state dict (e.g. ImageNet weights saved with ``torch.save(model.state_dict(),

@@ -108,7 +108,7 @@ class OmniDConfig(PreTrainedConfig):
         use_group_norm: Replace BatchNorm by GroupNorm (16 channels per group) in the backbone; BatchNorm
             statistics are unreliable with small batches of correlated frames.
         backbone_layer: Last ResNet stage used: 4 gives stride-32 features (as the authors' code), 3
-            stride-16 and 2 stride-8 features (finer maps for small images).
+            stride-16, 2 stride-8 and 1 stride-4 features (finer maps for small images).
         checkpoint_backbone: Recompute backbone activations in the backward pass (stage by stage) instead
             of storing them: much less memory at 480x480, about a third more backbone compute.
         resize_shape: (height, width) images are resized to before the backbone, intrinsics rescaled
@@ -322,7 +322,7 @@ class OmniDConfig(PreTrainedConfig):
         check_choice("prediction_type", self.prediction_type, PREDICTION_TYPES)
         check_choice("pillar_axis", self.pillar_axis, AXES)
         check_choice("plane_readout", self.plane_readout, PLANE_READOUTS)
-        check_choice("backbone_layer", self.backbone_layer, (2, 3, 4))
+        check_choice("backbone_layer", self.backbone_layer, (1, 2, 3, 4))
         for name in (
             "d_model",
             "num_heads",

@@ -20,12 +20,12 @@ def options(cmd: tuple[str, ...] | list[str]) -> dict[str, str]:
 
 
 def test_models_train_alike_on_the_same_demonstrations():
-    trainings = {m: options(mw.train(OUT, m, "push-v3")) for m in mw.MODELS}
+    trainings = {name: options(mw.train(OUT, name, model, "push-v3")) for name, model in mw.MODELS.items()}
     for opts in trainings.values():
         assert opts["--dataset.root"] == str(OUT / "data" / "push-v3")
         assert opts["--steps"] == str(mw.STEPS) and opts["--seed"] == "1000"
     # What differs: the policy and its cameras (OmniD: by name; DP: its input features, state included).
-    assert json.loads(trainings["omnid"]["--policy.cameras"]) == list(mw.MODELS["omnid"][1])
+    assert json.loads(trainings["omnid"]["--policy.cameras"]) == list(mw.MODELS["omnid"].cameras)
     assert json.loads(trainings["omnid_fixed"]["--policy.cameras"]) == ["corner", "corner2", "corner3"]
     assert trainings["omnid"]["--policy.volume_bounds"] == mw.VOLUME_BOUNDS
     features = json.loads(trainings["dp_corner2"]["--policy.input_features"])
@@ -55,7 +55,7 @@ def test_demonstrations_and_test_seeds_are_disjoint():
 
 
 def test_every_evaluation_has_its_blind_control_on_the_same_seeds(tmp_path):
-    runs = mw.protocol(tmp_path, ["push-v3"], list(mw.MODELS))
+    runs = mw.protocol(tmp_path, ["push-v3"], mw.MODELS)
     evals = [options(r.cmd) for r in runs if r.kind == "eval"]
     assert len(evals) == len(mw.MODELS) * len(mw.TEST_SEEDS) * 2
     seen = [e for e in evals if "--env.blackout_cameras" not in e]
@@ -68,7 +68,7 @@ def test_every_evaluation_has_its_blind_control_on_the_same_seeds(tmp_path):
 
 
 def test_report_pools_the_ranges_and_puts_the_published_numbers_beside(tmp_path, capsys):
-    runs = mw.protocol(tmp_path, ["push-v3"], ["omnid", "dp"])
+    runs = mw.protocol(tmp_path, ["push-v3"], {m: mw.MODELS[m] for m in ("omnid", "dp")})
     counts = {"eval/omnid": 12, "eval_blind/omnid": 1, "eval/dp": 6, "eval_blind/dp": 0}
     for run in runs:
         if run.kind != "eval":
@@ -96,7 +96,7 @@ def test_a_run_split_by_task_is_reported_as_one(tmp_path):
     sources = []
     for task, successes in (("push-v3", 9), ("assembly-v3", 4)):
         out = tmp_path / task
-        runs = mw.protocol(out, [task], ["omnid"])
+        runs = mw.protocol(out, [task], {"omnid": mw.MODELS["omnid"]})
         for run in runs:
             if run.kind == "eval":
                 run.output.mkdir(parents=True)

@@ -13,7 +13,9 @@ from torchvision.models import ResNet18_Weights
 from lerobot_omnid.policy.backbone import ResNetFeatures
 
 
-@pytest.mark.parametrize(("layer", "stride", "channels"), [(2, 8, 128), (3, 16, 256), (4, 32, 512)])
+@pytest.mark.parametrize(
+    ("layer", "stride", "channels"), [(1, 4, 64), (2, 8, 128), (3, 16, 256), (4, 32, 512)]
+)
 def test_feature_map_stride_and_channels(layer, stride, channels):
     backbone = ResNetFeatures("resnet18", layer, use_group_norm=True, weights_path=None)
     features = backbone(torch.rand(2, 3, 64, 48))
@@ -21,9 +23,9 @@ def test_feature_map_stride_and_channels(layer, stride, channels):
     assert features.shape == (2, channels, math.ceil(64 / stride), math.ceil(48 / stride))
 
 
-@pytest.mark.parametrize("layer", [1, 5])
+@pytest.mark.parametrize("layer", [0, 5])
 def test_config_rejects_other_stages(layer):
-    with pytest.raises(ValueError, match=rf"`backbone_layer`: expected one of \[2, 3, 4\], got {layer}"):
+    with pytest.raises(ValueError, match=rf"`backbone_layer`: expected one of \[1, 2, 3, 4\], got {layer}"):
         tiny_config(backbone_layer=layer)
 
 
@@ -119,7 +121,7 @@ def test_group_norm_refuses_pretrained_weights_before_any_download():
         ResNetFeatures("resnet18", 4, use_group_norm=True, weights_path="ResNet18_Weights.IMAGENET1K_V1")
 
 
-@pytest.mark.parametrize("layer", [2, 3, 4])
+@pytest.mark.parametrize("layer", [1, 2, 3, 4])
 def test_feature_cells_sit_where_feature_cell_centres_says(layer):
     """The gradient centroid of a feature cell (BatchNorm backbone in eval mode, so each cell depends only on
     its receptive field) is at pixel ``stride * j + offset``, not at ``(j + 0.5) * stride - 0.5``. The image
