@@ -68,8 +68,8 @@ def test_every_evaluation_has_its_blind_control_on_the_same_seeds(tmp_path):
 
 
 def test_report_pools_the_ranges_and_puts_the_published_numbers_beside(tmp_path, capsys):
-    runs = mw.protocol(tmp_path, ["push-v3"], {m: mw.MODELS[m] for m in ("omnid", "dp")})
-    counts = {"eval/omnid": 12, "eval_blind/omnid": 1, "eval/dp": 6, "eval_blind/dp": 0}
+    runs = mw.protocol(tmp_path, ["push-v3"], {m: mw.MODELS[m] for m in ("omnid_layer2", "dp")})
+    counts = {"eval/omnid_layer2": 12, "eval_blind/omnid_layer2": 1, "eval/dp": 6, "eval_blind/dp": 0}
     for run in runs:
         if run.kind != "eval":
             continue
@@ -96,7 +96,7 @@ def test_a_run_split_by_task_is_reported_as_one(tmp_path):
     sources = []
     for task, successes in (("push-v3", 9), ("assembly-v3", 4)):
         out = tmp_path / task
-        runs = mw.protocol(out, [task], {"omnid": mw.MODELS["omnid"]})
+        runs = mw.protocol(out, [task], {"omnid_layer2": mw.MODELS["omnid_layer2"]})
         for run in runs:
             if run.kind == "eval":
                 run.output.mkdir(parents=True)
@@ -118,7 +118,7 @@ def test_a_run_split_by_task_is_reported_as_one(tmp_path):
     ("argv", "message"),
     [
         (["--tasks", "push-v3,make-tea-v3"], "--tasks: expected names from assembly-v3,"),
-        (["--models", "omnid,act"], "--models: expected names from omnid,"),
+        (["--models", "omnid,act"], "--models: expected names from omnid_layer2,"),
         (["--summary", "s.json"], "--summary: expected with --report-only"),
     ],
 )
@@ -126,3 +126,19 @@ def test_bad_arguments_name_the_option(argv, message, tmp_path, capsys):
     with pytest.raises(SystemExit):
         mw.main(["--out", str(tmp_path), *argv])
     assert message in capsys.readouterr().err
+
+
+def test_the_chosen_stage_is_the_base_and_the_first_stage_stands_beside(tmp_path):
+    runs = mw.protocol(tmp_path, ["push-v3"], {m: mw.MODELS[m] for m in ("omnid_layer2", "omnid")})
+    for run in runs:
+        if run.kind == "eval":
+            successes = 9 if run.name.startswith("eval/omnid_layer2/") else 3
+            run.output.mkdir(parents=True)
+            overall = {"pc_success": 100 * successes / mw.TEST_EPISODES, "n_episodes": mw.TEST_EPISODES}
+            (run.output / "eval_info.json").write_text(json.dumps({"overall": overall}))
+            engine.write_stamp(run, "abc", 1.0)
+    mw.write_report(mw.summarise(runs), tmp_path / "report.md")
+    report = (tmp_path / "report.md").read_text()
+    assert "| push-v3 | OmniD | 60.0 (42.3-75.4) | 9/15" in report
+    assert "| push-v3 | OmniD, stride 16 | 20.0 (9.5-37.3) † | 3/15" in report
+    assert "| +40.0 (+15.3 to +58.6) | 0.0033 |" in report  # the chosen stage against the first

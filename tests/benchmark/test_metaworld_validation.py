@@ -3,13 +3,16 @@ alone, the comparison's trained model is reused, the validation seeds are disjoi
 demonstrations' and the test's, and the rule chooses as the protocol says."""
 
 import json
+from pathlib import Path
 
 import pytest
 
 from lerobot_omnid.benchmark import metaworld_comparison as mw
 from lerobot_omnid.benchmark import metaworld_validation as mv
 from lerobot_omnid.measure import engine
-from lerobot_omnid.measure.results import CellResult, write_run_summary
+from lerobot_omnid.measure.results import CellResult, read_run_summary, write_run_summary
+
+COMMITTED = Path(__file__).parents[2] / "docs" / "results" / "metaworld_stage_validation_cpu2.json"
 
 
 def options(cmd: tuple[str, ...]) -> dict[str, str]:
@@ -106,3 +109,14 @@ def test_report_from_the_summary_alone(tmp_path):
         "| omnid_layer1 | 1 (16x16) | 11/20 (34.2-74.2 %) | 3/20 (" in report and "| **chosen** |" in report
     )
     assert "| omnid_layer2 | 2 (8x8) | 7/20" in report
+
+
+def test_the_comparison_trains_omnid_at_the_stage_the_committed_validation_chose():
+    summary = read_run_summary(COMMITTED, mv.PROTOCOL)
+    chosen = mv.choose(mv.validation_cells(summary))  # the rule again, on the committed counts
+    assert chosen == summary.results["chosen"]
+    assert mv.CANDIDATES[chosen].backbone_layer == mw.CHOSEN_STAGE
+    for name in mw.DEFAULT_MODELS:
+        model = mw.MODELS[name]
+        assert model.policy != "omnid" or model.backbone_layer == mw.CHOSEN_STAGE, name
+    assert mw.BASES[0] in mw.DEFAULT_MODELS

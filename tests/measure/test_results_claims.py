@@ -535,7 +535,7 @@ def test_readme_many_draw_counts_match_their_summary():
     )
 
 
-METAWORLD_SUMMARIES = tuple(sorted(p.name for p in SUMMARIES.glob("metaworld_*_cpu2.json")))
+METAWORLD_SUMMARIES = tuple(sorted(p.name for p in SUMMARIES.glob("metaworld_*-v3_cpu2.json")))
 """The MetaWorld comparison, one file per task: docs/results.md's "MetaWorld" rebuild command merges these."""
 METAWORLD_SENTENCE = (
     r"MetaWorld\]\([^)]*\) \((\d) of 5 tasks[^)]*\): OmniD (\d+)/(\d+) vs DP (\d+)/(\d+) "

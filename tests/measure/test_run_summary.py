@@ -83,6 +83,7 @@ WRITERS = {
     "new_camera": "lerobot_omnid.benchmark.new_camera",
     "readout_selection": "lerobot_omnid.benchmark.readout_selection",
     "metaworld_comparison": "lerobot_omnid.benchmark.metaworld_comparison",
+    "metaworld_validation": "lerobot_omnid.benchmark.metaworld_validation",
     "position_extrapolation": "lerobot_omnid.diagnostics.position_extrapolation",
     "action_reach": "lerobot_omnid.diagnostics.action_reach",
     "layout_success": "lerobot_omnid.diagnostics.layout_success",
