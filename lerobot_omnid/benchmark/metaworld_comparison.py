@@ -49,15 +49,14 @@ from lerobot_omnid.measure.engine import (
     plan,
     report_from_summary,
     run_protocol,
+    summary_and_report,
 )
 from lerobot_omnid.measure.report import MISSING, format_rate, markdown_table, write_markdown
 from lerobot_omnid.measure.results import (
-    SUMMARY,
     CellResult,
     Key,
     RunSummary,
     collect,
-    write_run_summary,
 )
 
 TASKS = ("assembly-v3", "disassemble-v3", "stick-push-v3", "push-v3", "pick-place-wall-v3")
@@ -326,13 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = protocol(out, tasks, {m: MODELS[m] for m in models})
 
     commit = code_commit()
-
-    def write_outputs() -> None:
-        summary = summarise(runs, commit)
-        out.mkdir(parents=True, exist_ok=True)
-        write_run_summary(out / SUMMARY, summary)
-        write_report(summary, out / "report.md")
-
+    write_outputs = summary_and_report(out, lambda: summarise(runs, commit), write_report)
     run_protocol(runs, out, "metaworld", write_outputs, args.dry_run, args.report_only)
     return 0
 

@@ -33,9 +33,16 @@ from gym_omnid.metaworld_suite import DEFAULT_CAMERAS
 from lerobot_omnid.benchmark import metaworld_comparison as comparison
 from lerobot_omnid.benchmark.metaworld_comparison import Model
 from lerobot_omnid.cli import add_protocol_options
-from lerobot_omnid.measure.engine import Run, code_commit, evaluations, report_from_summary, run_protocol
+from lerobot_omnid.measure.engine import (
+    Run,
+    code_commit,
+    evaluations,
+    report_from_summary,
+    run_protocol,
+    summary_and_report,
+)
 from lerobot_omnid.measure.report import format_counts, format_p, markdown_table, write_markdown
-from lerobot_omnid.measure.results import SUMMARY, CellResult, RunSummary, collect, write_run_summary
+from lerobot_omnid.measure.results import CellResult, RunSummary, collect
 from lerobot_omnid.measure.stats import fisher_exact
 
 PROTOCOL = "metaworld_validation"
@@ -134,13 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     runs = protocol(out)
     commit = code_commit()
-
-    def write_outputs() -> None:
-        summary = summarise(runs, commit)
-        out.mkdir(parents=True, exist_ok=True)
-        write_run_summary(out / SUMMARY, summary)
-        write_report(summary, out / "report.md")
-
+    write_outputs = summary_and_report(out, lambda: summarise(runs, commit), write_report)
     run_protocol(runs, out, "metaworld validation", write_outputs, args.dry_run, args.report_only)
     return 0
 

@@ -30,12 +30,14 @@ from typing import Any
 from tqdm import tqdm
 
 from lerobot_omnid.measure.results import (
+    SUMMARY,
     EvalEntry,
     EvalRecord,
     RunSummary,
     merge_run_summaries,
     read_run_summary,
     record_of,
+    write_run_summary,
 )
 
 STAMPS = "stamps"
@@ -349,6 +351,21 @@ def run_protocol(
             stop_on_failure=True,
         )
     write_outputs()
+
+
+def summary_and_report(
+    out: Path, summarise: Callable[[], RunSummary], write_report: Callable[[RunSummary, Path], object]
+) -> Callable[[], None]:
+    """What a protocol writes after each finished run (``run_protocol``'s ``write_outputs``):
+    ``<out>/summary.json`` from ``summarise()`` and ``<out>/report.md`` from that summary."""
+
+    def write() -> None:
+        summary = summarise()
+        out.mkdir(parents=True, exist_ok=True)
+        write_run_summary(out / SUMMARY, summary)
+        write_report(summary, out / "report.md")
+
+    return write
 
 
 def eval_entry(run: Run) -> EvalEntry:

@@ -11,6 +11,7 @@ from omnid_testing import by_name, evaluation
 from lerobot_omnid.benchmark.plan import PROFILES, TASK0, build_plan
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.engine import CHECKPOINT, Run, is_done, plan
+from lerobot_omnid.measure.results import RunSummary, read_run_summary
 
 
 def test_a_plan_is_checked(tmp_path):
@@ -116,3 +117,14 @@ def test_evaluations_are_the_records_of_the_done_runs_with_their_cells(tmp_path)
     engine.write_stamp(without_cell, "abc", 1.0)
     with pytest.raises(ValueError, match="bare: expected an evaluation run with its table cell"):
         engine.evaluations([without_cell])
+
+
+def test_summary_and_report_writes_the_summary_and_the_report_of_it(tmp_path):
+    made = RunSummary("demo", {"steps": 1}, [], {"chosen": "a"}, "abc")
+    reported = []
+    write = engine.summary_and_report(
+        tmp_path / "out", lambda: made, lambda summary, path: reported.append((summary, path))
+    )
+    write()
+    assert read_run_summary(tmp_path / "out" / "summary.json", "demo").results == {"chosen": "a"}
+    assert reported == [(made, tmp_path / "out" / "report.md")]
