@@ -81,12 +81,11 @@ BACKBONE_LAYER = 3  # OmniD's feature stage: mini's (stride 16, 4x4 maps at 64 p
 
 @dataclass(frozen=True)
 class Model:
-    """What a model of a MetaWorld protocol is: its LeRobot policy type, its cameras, the image size of its
-    data and (OmniD) the last ResNet stage whose features it samples."""
+    """What a model of a MetaWorld protocol is: its LeRobot policy type, its cameras and (OmniD) the last
+    ResNet stage whose features it samples."""
 
     policy: str
     cameras: tuple[str, ...]
-    image_size: int = IMAGE_SIZE
     backbone_layer: int = BACKBONE_LAYER
 
 
@@ -113,17 +112,16 @@ LABELS = {
 CHART = "metaworld.png"
 
 
-def data_dir(out: Path, task: str, image_size: int = IMAGE_SIZE) -> Path:
-    """``task``'s demonstrations at ``image_size`` (the protocol's size in the plain folder)."""
-    return out / "data" / (task if image_size == IMAGE_SIZE else f"{task}_{image_size}px")
+def data_dir(out: Path, task: str) -> Path:
+    return out / "data" / task
 
 
-def record(out: Path, task: str, image_size: int = IMAGE_SIZE) -> list[str]:
-    root = data_dir(out, task, image_size)
+def record(out: Path, task: str) -> list[str]:
+    root = data_dir(out, task)
     return [
         str(commands.BIN / "omnid-record"),
         *("--suite", "metaworld", "--task", task, "--episodes", str(DEMONSTRATIONS)),
-        *("--cameras", ",".join(DEFAULT_CAMERAS), "--image-size", str(image_size), "--seed", "0"),
+        *("--cameras", ",".join(DEFAULT_CAMERAS), "--image-size", str(IMAGE_SIZE), "--seed", "0"),
         *("--root", str(root), "--repo-id", f"local/{root.name}"),
     ]
 
@@ -141,10 +139,10 @@ def train(out: Path, name: str, model: Model, task: str) -> list[str]:
         flags += [f"--policy.cameras={commands.json_list(model.cameras)}"]
         flags += [f"--policy.volume_bounds={VOLUME_BOUNDS}", f"--policy.volume_shape={VOLUME_SHAPE}"]
     else:  # only the state and these images: the dataset's calibration columns are no input of DP
-        features = input_features(model.cameras, model.image_size, STATE_DIM)
+        features = input_features(model.cameras, IMAGE_SIZE, STATE_DIM)
         flags.append(f"--policy.input_features={features}")
     return commands.train_command(
-        data_dir(out, task, model.image_size),
+        data_dir(out, task),
         out / "train" / name / task,
         flags,
         STEPS,
@@ -169,7 +167,7 @@ def evaluate(
         "--env.type=omnid_metaworld",
         f"--env.task={task}",
         f"--env.cameras=[{cameras}]",
-        f"--env.image_size={model.image_size}",
+        f"--env.image_size={IMAGE_SIZE}",
         f"--env.episode_length={EPISODE_LENGTH}",
         f"--eval.n_episodes={episodes}",
         f"--eval.batch_size={MINI.eval_batch_size}",
@@ -187,22 +185,16 @@ def protocol(
     episodes: int = TEST_EPISODES,
     stage: str = "eval",
 ) -> list[Run]:
-    """Per task: record (once per image size), then per model train and evaluate (and its blind control)
-    on every range of ``episodes`` env seeds from each of ``seeds``."""
+    """Per task: record, then per model train and evaluate (and its blind control) on every range of
+    ``episodes`` env seeds from each of ``seeds``."""
     runs: list[Run] = []
     for task in tasks:
-        recorded = {}
-        for size in dict.fromkeys(m.image_size for m in models.values()):
-            folder = data_dir(out, task, size)
-            run = Run(f"record/{folder.name}", "record", tuple(record(out, task, size)), folder)
-            recorded[size] = run.name
-            runs.append(run)
+        recorded = Run(f"record/{task}", "record", tuple(record(out, task)), data_dir(out, task))
+        runs.append(recorded)
         for name, model in models.items():
             trained = f"train/{name}/{task}"
             cmd = tuple(train(out, name, model, task))
-            runs.append(
-                Run(trained, "train", cmd, out / "train" / name / task, (recorded[model.image_size],))
-            )
+            runs.append(Run(trained, "train", cmd, out / "train" / name / task, (recorded.name,)))
             for seed in seeds:
                 for blind in (False, True):
                     folder = eval_dir(out, name, task, seed, blind, stage)

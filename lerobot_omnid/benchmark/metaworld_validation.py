@@ -42,7 +42,7 @@ from lerobot_omnid.measure.engine import (
     summary_and_report,
 )
 from lerobot_omnid.measure.report import format_counts, format_p, markdown_table, write_markdown
-from lerobot_omnid.measure.results import CellResult, RunSummary, collect
+from lerobot_omnid.measure.results import CellResult, EvalRecord, RunSummary, collect
 from lerobot_omnid.measure.stats import fisher_exact
 
 PROTOCOL = "metaworld_validation"
@@ -71,12 +71,12 @@ def choose(cells: Mapping[tuple[str, str], CellResult]) -> str | None:
     return max(above, key=lambda n: cells[n, ""].successes, default=next(iter(CANDIDATES)))
 
 
-def validation_cells(summary: RunSummary) -> dict[tuple[str, str], CellResult]:
+def validation_cells(records: Sequence[EvalRecord]) -> dict[tuple[str, str], CellResult]:
     """(candidate, control) -> the counts of its validation."""
     return {
         (key[0], control): cell
         for control in ("", "blind")
-        for key, cell in collect(summary.evaluations, control).items()
+        for key, cell in collect(records, control).items()
     }
 
 
@@ -90,17 +90,17 @@ def summarise(runs: Sequence[Run], commit: str | None = None) -> RunSummary:
         "image_size": comparison.IMAGE_SIZE,
         "steps": comparison.STEPS,
     }
-    summary = RunSummary(PROTOCOL, settings, evaluations(runs), {}, commit)
+    records = evaluations(runs)
     stages = {name: model.backbone_layer for name, model in CANDIDATES.items()}
-    summary.results.update(stages=stages, chosen=choose(validation_cells(summary)))
-    return summary
+    results = {"stages": stages, "chosen": choose(validation_cells(records))}
+    return RunSummary(PROTOCOL, settings, records, results, commit)
 
 
 def write_report(summary: RunSummary, path: Path) -> None:
     """``report.md``: each candidate's validation success, its blind control, Fisher p between them and the
     rule's choice."""
     settings, results = summary.settings, summary.results
-    cells = validation_cells(summary)
+    cells = validation_cells(summary.evaluations)
     first = settings["validation_seed"]
     rows = []
     for name, stage in results["stages"].items():

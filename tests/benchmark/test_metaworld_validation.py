@@ -113,7 +113,7 @@ def test_report_from_the_summary_alone(tmp_path):
 
 def test_the_comparison_trains_omnid_at_the_stage_the_committed_validation_chose():
     summary = read_run_summary(COMMITTED, mv.PROTOCOL)
-    chosen = mv.choose(mv.validation_cells(summary))  # the rule again, on the committed counts
+    chosen = mv.choose(mv.validation_cells(summary.evaluations))  # the rule again, on the committed counts
     assert chosen == summary.results["chosen"]
     assert mv.CANDIDATES[chosen].backbone_layer == mw.CHOSEN_STAGE
     for name in mw.DEFAULT_MODELS:
