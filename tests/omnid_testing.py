@@ -287,3 +287,8 @@ def static_and_per_frame_twins(tmp_path: Path, cams: tuple[str, ...], episodes: 
     )
     per_frame.load_state_dict(static.state_dict())
     return dataset, columns_root, static, per_frame
+
+
+def command_options(cmd) -> dict[str, str]:
+    """A command line's ``--name=value`` options as a mapping (``--name value`` pairs are left out)."""
+    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))

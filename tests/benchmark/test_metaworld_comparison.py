@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from gym_omnid.metaworld_suite import STATE_DIM
+from omnid_testing import command_options
 
 from lerobot_omnid.benchmark import metaworld_comparison as mw
 from lerobot_omnid.measure import engine
@@ -15,12 +16,10 @@ from lerobot_omnid.measure.results import write_run_summary
 OUT = Path("out")
 
 
-def options(cmd: tuple[str, ...] | list[str]) -> dict[str, str]:
-    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
-
-
 def test_models_train_alike_on_the_same_demonstrations():
-    trainings = {name: options(mw.train(OUT, name, model, "push-v3")) for name, model in mw.MODELS.items()}
+    trainings = {
+        name: command_options(mw.train(OUT, name, model, "push-v3")) for name, model in mw.MODELS.items()
+    }
     for opts in trainings.values():
         assert opts["--dataset.root"] == str(OUT / "data" / "push-v3")
         assert opts["--steps"] == str(mw.STEPS) and opts["--seed"] == "1000"
@@ -56,7 +55,7 @@ def test_demonstrations_and_test_seeds_are_disjoint():
 
 def test_every_evaluation_has_its_blind_control_on_the_same_seeds(tmp_path):
     runs = mw.protocol(tmp_path, ["push-v3"], mw.MODELS)
-    evals = [options(r.cmd) for r in runs if r.kind == "eval"]
+    evals = [command_options(r.cmd) for r in runs if r.kind == "eval"]
     assert len(evals) == len(mw.MODELS) * len(mw.TEST_SEEDS) * 2
     seen = [e for e in evals if "--env.blackout_cameras" not in e]
     blind = [e for e in evals if "--env.blackout_cameras" in e]

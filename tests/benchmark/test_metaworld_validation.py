@@ -3,20 +3,16 @@ alone, the comparison's trained model is reused, the validation seeds are disjoi
 demonstrations' and the test's, and the rule chooses as the protocol says."""
 
 import json
-from pathlib import Path
 
 import pytest
+from omnid_testing import COMMITTED_SUMMARIES, command_options
 
 from lerobot_omnid.benchmark import metaworld_comparison as mw
 from lerobot_omnid.benchmark import metaworld_validation as mv
 from lerobot_omnid.measure import engine
 from lerobot_omnid.measure.results import CellResult, read_run_summary, write_run_summary
 
-COMMITTED = Path(__file__).parents[2] / "docs" / "results" / "metaworld_stage_validation_cpu2.json"
-
-
-def options(cmd: tuple[str, ...]) -> dict[str, str]:
-    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
+COMMITTED = COMMITTED_SUMMARIES / "metaworld_stage_validation_cpu2.json"
 
 
 def test_candidates_differ_from_the_comparisons_omnid_in_the_stage_alone(tmp_path):
@@ -25,9 +21,9 @@ def test_candidates_differ_from_the_comparisons_omnid_in_the_stage_alone(tmp_pat
     # The comparison's record and OmniD run are the same runs (fingerprints): a copied folder reuses them.
     for name in (f"record/{mv.TASK}", f"train/omnid/{mv.TASK}"):
         assert runs[name].fingerprint == compared[name].fingerprint
-    reference = options(runs[f"train/omnid/{mv.TASK}"].cmd)
+    reference = command_options(runs[f"train/omnid/{mv.TASK}"].cmd)
     for name, model in mv.CANDIDATES.items():
-        trained = options(runs[f"train/{name}/{mv.TASK}"].cmd)
+        trained = command_options(runs[f"train/{name}/{mv.TASK}"].cmd)
         assert trained.pop("--policy.backbone_layer") == str(model.backbone_layer)
         assert trained.pop("--output_dir").endswith(f"train/{name}/{mv.TASK}")
         assert trained == {
@@ -37,7 +33,7 @@ def test_candidates_differ_from_the_comparisons_omnid_in_the_stage_alone(tmp_pat
 
 
 def test_validation_seeds_are_disjoint_from_the_demonstrations_and_the_test(tmp_path):
-    evals = [options(r.cmd) for r in mv.protocol(tmp_path) if r.kind == "eval"]
+    evals = [command_options(r.cmd) for r in mv.protocol(tmp_path) if r.kind == "eval"]
     assert len(evals) == 2 * len(mv.CANDIDATES)  # each with its blind control
     assert {e["--seed"] for e in evals} == {str(mv.VALIDATION_SEED)}
     assert all(e["--eval.n_episodes"] == str(mv.VALIDATION_EPISODES) for e in evals)

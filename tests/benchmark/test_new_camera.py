@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+from omnid_testing import command_options
 
 from lerobot_omnid.benchmark import new_camera as nc
 from lerobot_omnid.benchmark import task_sizing
@@ -29,10 +30,6 @@ from lerobot_omnid.measure.results import EvalRecord, RunSummary, write_run_summ
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def options(cmd: tuple[str, ...]) -> dict[str, str]:
-    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
-
-
 def test_data_and_mini_pretraining_are_the_benchmarks_own_runs(tmp_path):
     fewshot = dataclasses.replace(PROFILES["mini-fewshot"], methods=("omnid",))
     expected = {r.name: r.cmd for r in build_plan(fewshot, tmp_path, (TASK0,))}
@@ -41,8 +38,8 @@ def test_data_and_mini_pretraining_are_the_benchmarks_own_runs(tmp_path):
         assert runs[name] == expected[name], name
     # The paper's hypothesis is the benchmark's fine-tuning, in a folder of its own.
     paper, benchmark = (
-        options(runs["finetune_validation/paper"]),
-        options(expected["finetune/omnid/select_apple"]),
+        command_options(runs["finetune_validation/paper"]),
+        command_options(expected["finetune/omnid/select_apple"]),
     )
     assert {k: v for k, v in paper.items() if k != "--output_dir"} == {
         k: v for k, v in benchmark.items() if k != "--output_dir"
@@ -50,7 +47,7 @@ def test_data_and_mini_pretraining_are_the_benchmarks_own_runs(tmp_path):
 
 
 def test_hypotheses_differ_only_where_they_say(tmp_path):
-    runs = {r.name: options(r.cmd) for r in nc.protocol(tmp_path)}
+    runs = {r.name: command_options(r.cmd) for r in nc.protocol(tmp_path)}
     mini, single = runs["train/omnid/select_apple"], runs["train/omnid_single_camera/select_apple"]
     assert set(single.items()) - set(mini.items()) == {
         ("--policy.single_camera_rate", "0.5"),
@@ -83,13 +80,13 @@ def test_replay_mixes_the_camera_a_episodes_with_as_many_training_episodes(tmp_p
     assert merge.needs == (fewshot.name, replayed.name)
     tuned = runs["finetune_validation/long_replay"]
     assert merge.name in tuned.needs
-    opts = options(tuned.cmd)
+    opts = command_options(tuned.cmd)
     assert opts["--dataset.root"] == str(merge.output) and opts["--steps"] == "1000"
     assert json.loads(opts["--policy.cameras"]) == ["cam_a", "cam_b", "cam_c", "cam_d", "cam_e"]
 
 
 def test_validation_sees_camera_a_alone_on_seeds_of_its_own(tmp_path):
-    evals = [options(r.cmd) for r in nc.protocol(tmp_path) if r.kind == "eval"]
+    evals = [command_options(r.cmd) for r in nc.protocol(tmp_path) if r.kind == "eval"]
     assert len(evals) == len(nc.PRETRAINED) + len(nc.HYPOTHESES)
     for opts in evals:
         assert opts["--env.cameras"] == "[cam_a]" and opts["--policy.cameras"] == '["cam_a"]'
@@ -175,8 +172,8 @@ def test_the_test_profile_is_the_committed_selection_on_the_validations_runs(tmp
     # Controls: each camera-A model's blind one; the B-E models' are mini's, not run again.
     controls = [name for name in test_runs if name.startswith(("eval_", "calibration/"))]
     assert controls and all("/fewshot_a/" in name and "blind" in name for name in controls), controls
-    tuned = options(test_runs[f"finetune/omnid_{selected}/select_apple"])
-    chosen = options(validation_runs[f"finetune_validation/{selected}"])
+    tuned = command_options(test_runs[f"finetune/omnid_{selected}/select_apple"])
+    chosen = command_options(validation_runs[f"finetune_validation/{selected}"])
     assert {k: v for k, v in tuned.items() if k != "--output_dir"} == {
         k: v for k, v in chosen.items() if k != "--output_dir"
     }

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from omnid_testing import COMMITTED_SUMMARIES
+from omnid_testing import COMMITTED_SUMMARIES, command_options
 
 from lerobot_omnid.benchmark import readout_selection as rs
 from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, HELDOUT_SEED, PROFILES
@@ -16,15 +16,11 @@ from lerobot_omnid.policy.plane_readout import PLANE_READOUTS
 OUT, DATA = Path("out"), Path("data")
 
 
-def options(cmd: list[str]) -> dict[str, str]:
-    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
-
-
 def test_candidates_differ_only_in_their_readout():
-    keypoints = options(rs.train(OUT, DATA, "keypoints", "cpu"))
+    keypoints = command_options(rs.train(OUT, DATA, "keypoints", "cpu"))
     assert keypoints["--policy.plane_readout"] == "keypoints" and keypoints["--steps"] == "1000"
     for readout in PLANE_READOUTS:
-        other = options(rs.train(OUT, DATA, readout, "cpu"))
+        other = command_options(rs.train(OUT, DATA, readout, "cpu"))
         differ = {k for k in keypoints.keys() | other.keys() if keypoints.get(k) != other.get(k)}
         expected = set() if readout == "keypoints" else {"--policy.plane_readout", "--output_dir"}
         if readout == "flatten":  # the paper compresses the plane to one channel
@@ -44,7 +40,7 @@ def test_validation_seeds_are_disjoint_from_training_test_and_other_recordings()
     test = {s for k in paper.eval_seeds for s in env_seeds(k * 1000, paper.eval_episodes)}
     others = env_seeds(0, 1000) | env_seeds(FEWSHOT_SEED, 1000) | env_seeds(HELDOUT_SEED, 1000)
     assert not validation & (test | others | env_seeds(rs.TEST_SEED, rs.TEST_EPISODES))
-    cmd = options(rs.evaluation(OUT, "validation", "bev_conv", "id", "cpu").cmd)
+    cmd = command_options(rs.evaluation(OUT, "validation", "bev_conv", "id", "cpu").cmd)
     assert cmd["--seed"] == str(rs.VALIDATION_SEED) and cmd["--eval.n_episodes"] == "20"
     assert cmd["--env.layout"] == "id" and cmd["--env.background"] == "id"
     record_cmd = rs.validation_runs(OUT, DATA, "cpu", record_data=False)[0].cmd
@@ -73,7 +69,7 @@ def test_test_phase_evaluates_only_the_selected_readout_and_the_papers():
     runs = rs.test_runs(OUT, "latent_queries", "cpu")
     readouts = {run.name.split("/")[2] for run in runs if run.kind == "eval"}
     assert readouts == {"latent_queries", "flatten"}
-    evals = [options(run.cmd) for run in runs if run.kind == "eval"]
+    evals = [command_options(run.cmd) for run in runs if run.kind == "eval"]
     assert {e["--seed"] for e in evals} == {str(rs.TEST_SEED)} and {
         e["--eval.n_episodes"] for e in evals
     } == {"30"}

@@ -5,7 +5,7 @@ import json
 from pathlib import Path
 
 import pytest
-from omnid_testing import COMMITTED_SUMMARIES
+from omnid_testing import COMMITTED_SUMMARIES, command_options
 
 from lerobot_omnid.benchmark import rigs_and_wrist as rw
 from lerobot_omnid.measure import engine
@@ -14,13 +14,9 @@ from lerobot_omnid.measure.results import read_run_summary
 OUT = Path("out")
 
 
-def options(cmd: list[str]) -> dict[str, str]:
-    return dict(arg.partition("=")[::2] for arg in cmd[1:] if arg.startswith("--"))
-
-
 @pytest.mark.parametrize("pair", sorted(rw.PAIRS))
 def test_pairs_train_with_the_same_steps_seed_and_options(pair):
-    first, second = (options(rw.train(OUT, m)) for m in rw.PAIRS[pair])
+    first, second = (command_options(rw.train(OUT, m)) for m in rw.PAIRS[pair])
     differ = {k for k in first.keys() | second.keys() if first.get(k) != second.get(k)}
     expected = {"--dataset.repo_id", "--dataset.root", "--output_dir"}
     assert differ == (expected | {"--policy.cameras"} if pair == "wrist" else expected)
@@ -28,7 +24,7 @@ def test_pairs_train_with_the_same_steps_seed_and_options(pair):
 
 
 def test_two_rigs_merge_the_default_and_closer_halves_into_the_size_of_one_rig():
-    merge = options(rw.merge(OUT))
+    merge = command_options(rw.merge(OUT))
     assert merge["--operation.type"] == "merge"
     parts = [Path(root).name for root in json.loads(merge["--operation.roots"])]
     assert {rw.DATASETS[p][0] for p in parts} == {"default", "closer"}
@@ -39,7 +35,7 @@ def test_two_rigs_merge_the_default_and_closer_halves_into_the_size_of_one_rig()
 
 @pytest.mark.parametrize("blind", [False, True])
 def test_evaluations_read_the_rig_calibration_of_every_frame(blind):
-    cmd = options(rw.evaluate(OUT, "wrist", OUT / "ck", "higher", "id", 30, blind))
+    cmd = command_options(rw.evaluate(OUT, "wrist", OUT / "ck", "higher", "id", 30, blind))
     assert cmd["--env.rig"] == "higher" and cmd["--env.per_frame_calibration"] == "true"
     assert "observation.images.cam_wrist" in cmd["--policy.frame_calibration"]
     assert cmd["--eval.n_episodes"] == "30" and cmd["--seed"] == str(rw.EVAL_SEED)
