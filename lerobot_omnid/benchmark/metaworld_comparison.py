@@ -38,26 +38,12 @@ from gym_omnid.metaworld_suite import DEFAULT_CAMERAS, FIXED_CAMERAS, STATE_DIM
 from lerobot_omnid.benchmark import commands
 from lerobot_omnid.benchmark.methods import input_features, method_flags
 from lerobot_omnid.benchmark.plan import MINI, TRAIN_SEED
-from lerobot_omnid.cli import add_protocol_options
+from lerobot_omnid.cli import csv_of
 from lerobot_omnid.measure.across_tasks import NOT_ABOVE_BLIND, pooled_comparison, task_table
 from lerobot_omnid.measure.charts import draw_panel, pyplot, save_figure
-from lerobot_omnid.measure.engine import (
-    CHECKPOINT,
-    Run,
-    code_commit,
-    evaluations,
-    plan,
-    report_from_summary,
-    run_protocol,
-    summary_and_report,
-)
+from lerobot_omnid.measure.engine import CHECKPOINT, Run, evaluations, plan, protocol_main
 from lerobot_omnid.measure.report import MISSING, format_rate, markdown_table, write_markdown
-from lerobot_omnid.measure.results import (
-    CellResult,
-    Key,
-    RunSummary,
-    collect,
-)
+from lerobot_omnid.measure.results import CellResult, Key, RunSummary, collect
 
 TASKS = ("assembly-v3", "disassemble-v3", "stick-push-v3", "push-v3", "pick-place-wall-v3")
 PROTOCOL = "metaworld_comparison"
@@ -302,24 +288,23 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", type=Path, default=Path("outputs/metaworld"))
-    parser.add_argument("--tasks", default=",".join(TASKS), help=f"subset of {','.join(TASKS)}")
-    parser.add_argument("--models", default=",".join(DEFAULT_MODELS), help=f"subset of {','.join(MODELS)}")
-    add_protocol_options(parser)
-    args = parser.parse_args(argv)
-    out = args.out.resolve()
-    if report_from_summary(parser, args, out, PROTOCOL, write_report):
-        return 0
-    tasks, models = args.tasks.split(","), args.models.split(",")
-    if unknown := [t for t in tasks if t not in TASKS]:
-        parser.error(f"--tasks: expected names from {','.join(TASKS)}, got {','.join(unknown)}")
-    if unknown := [m for m in models if m not in MODELS]:
-        parser.error(f"--models: expected names from {','.join(MODELS)}, got {','.join(unknown)}")
-    runs = protocol(out, tasks, {m: MODELS[m] for m in models})
-
-    commit = code_commit()
-    write_outputs = summary_and_report(out, lambda: summarise(runs, commit), write_report)
-    run_protocol(runs, out, "metaworld", write_outputs, args.dry_run, args.report_only)
-    return 0
+    parser.add_argument(
+        "--tasks", type=csv_of(str, TASKS), default=TASKS, help=f"subset of {','.join(TASKS)} (default all)"
+    )
+    parser.add_argument(
+        "--models",
+        type=csv_of(str, MODELS),
+        default=DEFAULT_MODELS,
+        help=f"subset of {','.join(MODELS)} (default {','.join(DEFAULT_MODELS)})",
+    )
+    return protocol_main(
+        parser,
+        argv,
+        PROTOCOL,
+        lambda args, out: protocol(out, args.tasks, {m: MODELS[m] for m in args.models}),
+        summarise,
+        write_report,
+    )
 
 
 if __name__ == "__main__":

@@ -32,15 +32,7 @@ from gym_omnid.metaworld_suite import DEFAULT_CAMERAS
 
 from lerobot_omnid.benchmark import metaworld_comparison as comparison
 from lerobot_omnid.benchmark.metaworld_comparison import Model
-from lerobot_omnid.cli import add_protocol_options
-from lerobot_omnid.measure.engine import (
-    Run,
-    code_commit,
-    evaluations,
-    report_from_summary,
-    run_protocol,
-    summary_and_report,
-)
+from lerobot_omnid.measure.engine import Run, evaluations, protocol_main
 from lerobot_omnid.measure.report import format_counts, format_p, markdown_table, write_markdown
 from lerobot_omnid.measure.results import CellResult, EvalRecord, RunSummary, collect
 from lerobot_omnid.measure.stats import fisher_exact
@@ -134,16 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", type=Path, default=Path("outputs/metaworld_validation"))
-    add_protocol_options(parser)
-    args = parser.parse_args(argv)
-    out = args.out.resolve()
-    if report_from_summary(parser, args, out, PROTOCOL, write_report):
-        return 0
-    runs = protocol(out)
-    commit = code_commit()
-    write_outputs = summary_and_report(out, lambda: summarise(runs, commit), write_report)
-    run_protocol(runs, out, "metaworld validation", write_outputs, args.dry_run, args.report_only)
-    return 0
+    return protocol_main(parser, argv, PROTOCOL, lambda _, out: protocol(out), summarise, write_report)
 
 
 if __name__ == "__main__":

@@ -56,23 +56,10 @@ from lerobot_omnid.benchmark.methods import (
     variant_flags,
 )
 from lerobot_omnid.benchmark.plan import FEWSHOT_SEED, MINI, REPLAY, TASK0, TRAIN_SEED, replay_runs
-from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.keys import image_key
-from lerobot_omnid.measure.engine import (
-    CHECKPOINT,
-    Run,
-    code_commit,
-    evaluations,
-    plan,
-    report_from_summary,
-    run_protocol,
-)
+from lerobot_omnid.measure.engine import CHECKPOINT, Run, evaluations, plan, protocol_main
 from lerobot_omnid.measure.report import write_markdown
-from lerobot_omnid.measure.results import (
-    SUMMARY,
-    RunSummary,
-    write_run_summary,
-)
+from lerobot_omnid.measure.results import RunSummary
 from lerobot_omnid.measure.stats import wilson_interval
 
 PRETRAINED = {"mini": "", "single_camera": SINGLE_CAMERA.name}  # name: the variant it is ("": mini's OmniD)
@@ -286,33 +273,29 @@ def write_report(summary: RunSummary, path: Path) -> None:
     write_markdown(lines, path)
 
 
+def write_selection(summary: RunSummary, results: Path) -> None:
+    """``selection.json``, once: the hypothesis the rule selects when every one is validated."""
+    selected = summary.results["selected"]
+    if selected and not (results / SELECTION_FILE).is_file():
+        selection = {"selected": selected, "rule": select.__doc__, "commit": summary.commit}
+        (results / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--out", type=Path, default=Path("outputs/new_camera"))
-    add_protocol_options(parser)
-    args = parser.parse_args(argv)
-    out = args.out.resolve()
-    if report_from_summary(parser, args, out, PROTOCOL, write_report):
-        return 0
-    runs = protocol(out)
-    commit = code_commit()
-
-    results = results_dir(out)
-
-    def write_outputs() -> None:
-        summary = summarise(runs, commit)
-        results.mkdir(parents=True, exist_ok=True)
-        write_run_summary(results / SUMMARY, summary)
-        selected = summary.results["selected"]
-        if selected and not (results / SELECTION_FILE).is_file():
-            selection = {"selected": selected, "rule": select.__doc__, "commit": commit}
-            (results / SELECTION_FILE).write_text(json.dumps(selection, indent=2) + "\n")
-        write_report(summary, results / "report.md")
-
-    run_protocol(runs, out, "new camera", write_outputs, args.dry_run, args.report_only)
-    return 0
+    return protocol_main(
+        parser,
+        argv,
+        PROTOCOL,
+        lambda _, out: protocol(out),
+        summarise,
+        write_report,
+        results_dir=results_dir,
+        after_summary=write_selection,
+    )
 
 
 if __name__ == "__main__":

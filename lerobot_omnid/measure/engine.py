@@ -29,6 +29,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from lerobot_omnid.cli import add_protocol_options
 from lerobot_omnid.measure.results import (
     SUMMARY,
     EvalEntry,
@@ -353,21 +354,6 @@ def run_protocol(
     write_outputs()
 
 
-def summary_and_report(
-    out: Path, summarise: Callable[[], RunSummary], write_report: Callable[[RunSummary, Path], object]
-) -> Callable[[], None]:
-    """What a protocol writes after each finished run (``run_protocol``'s ``write_outputs``):
-    ``<out>/summary.json`` from ``summarise()`` and ``<out>/report.md`` from that summary."""
-
-    def write() -> None:
-        summary = summarise()
-        out.mkdir(parents=True, exist_ok=True)
-        write_run_summary(out / SUMMARY, summary)
-        write_report(summary, out / "report.md")
-
-    return write
-
-
 def eval_entry(run: Run) -> EvalEntry:
     """An evaluation run as the cell it fills, with the commit of its stamp."""
     if run.kind != "eval" or run.result is None:
@@ -435,3 +421,39 @@ def report_from_summary(
         parser.error(f"--summary: {e}")
     write_report(summary, out / "report.md")
     return True
+
+
+def protocol_main(
+    parser: argparse.ArgumentParser,
+    argv: Sequence[str] | None,
+    protocol: str,
+    make_plan: Callable[[argparse.Namespace, Path], Sequence[Run]],
+    summarise: Callable[[Sequence[Run], str | None], RunSummary],
+    write_report: Callable[[RunSummary, Path], object],
+    results_dir: Callable[[Path], Path] = lambda out: out,
+    after_summary: Callable[[RunSummary, Path], object] | None = None,
+) -> int:
+    """A protocol's command. ``parser`` (its ``--out`` and own options) gets the engine's; with
+    ``--summary`` it reports committed summaries (:func:`report_from_summary`); otherwise the plan
+    ``make_plan(args, out)`` goes to :func:`run_protocol`, which writes ``summarise(runs, commit)`` as
+    ``summary.json`` into ``results_dir(out)``, then ``after_summary(summary, folder)`` (what a protocol
+    decides from it, e.g. a selection file) and ``report.md``, after each finished run."""
+    add_protocol_options(parser)
+    args = parser.parse_args(argv)
+    out = args.out.resolve()
+    if report_from_summary(parser, args, out, protocol, write_report):
+        return 0
+    runs = make_plan(args, out)
+    commit = code_commit()
+    folder = results_dir(out)
+
+    def write_outputs() -> None:
+        summary = summarise(runs, commit)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_run_summary(folder / SUMMARY, summary)
+        if after_summary is not None:
+            after_summary(summary, folder)
+        write_report(summary, folder / "report.md")
+
+    run_protocol(runs, out, protocol, write_outputs, args.dry_run, args.report_only)
+    return 0

@@ -116,8 +116,14 @@ def test_a_run_split_by_task_is_reported_as_one(tmp_path):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--tasks", "push-v3,make-tea-v3"], "--tasks: expected names from assembly-v3,"),
-        (["--models", "omnid,act"], "--models: expected names from omnid_layer2,"),
+        (
+            ["--tasks", "push-v3,make-tea-v3"],
+            "--tasks: expected comma-separated distinct values from ['assembly-v3',",
+        ),
+        (
+            ["--models", "omnid,act"],
+            "--models: expected comma-separated distinct values from ['omnid_layer2',",
+        ),
         (["--summary", "s.json"], "--summary: expected with --report-only"),
     ],
 )

@@ -2,6 +2,7 @@
 below the planned inputs. (Running plans with tiny Python commands as the tools:
 tests/e2e/test_engine_runs.py.)"""
 
+import argparse
 import dataclasses
 from pathlib import Path
 
@@ -119,12 +120,34 @@ def test_evaluations_are_the_records_of_the_done_runs_with_their_cells(tmp_path)
         engine.evaluations([without_cell])
 
 
-def test_summary_and_report_writes_the_summary_and_the_report_of_it(tmp_path):
-    made = RunSummary("demo", {"steps": 1}, [], {"chosen": "a"}, "abc")
-    reported = []
-    write = engine.summary_and_report(
-        tmp_path / "out", lambda: made, lambda summary, path: reported.append((summary, path))
-    )
-    write()
-    assert read_run_summary(tmp_path / "out" / "summary.json", "demo").results == {"chosen": "a"}
-    assert reported == [(made, tmp_path / "out" / "report.md")]
+def test_protocol_main_writes_the_summary_its_decision_and_report_or_reports_committed_summaries(
+    tmp_path, monkeypatch
+):
+    """A protocol's command: it writes ``summary.json``, what the protocol decides from it and
+    ``report.md`` into the protocol's results folder; with ``--summary`` it only reports those."""
+    monkeypatch.setattr(engine, "code_commit", lambda: "abc")  # git runs in a subprocess
+    planned, decided, reported = [], [], []
+
+    def main(argv: list[str]) -> int:
+        parser = argparse.ArgumentParser()
+        parser.add_argument("--out", type=Path)
+        return engine.protocol_main(
+            parser,
+            argv,
+            "demo",
+            lambda args, out: planned.append(out) or plan([evaluation(out, "a")], out),
+            lambda runs, commit: RunSummary("demo", {"runs": len(runs)}, [], {"chosen": "a"}, commit),
+            lambda summary, path: reported.append((summary.settings, path)),
+            results_dir=lambda out: out / "results",
+            after_summary=lambda summary, folder: decided.append((summary.commit, folder)),
+        )
+
+    out = tmp_path / "out"
+    assert main(["--out", str(out), "--report-only"]) == 0
+    summary = out / "results" / "summary.json"
+    assert read_run_summary(summary, "demo").results == {"chosen": "a"}
+    assert planned == [out] and decided == [("abc", out / "results")]
+    assert reported == [({"runs": 1}, out / "results" / "report.md")]
+    assert main(["--out", str(tmp_path / "again"), "--report-only", "--summary", str(summary)]) == 0
+    assert planned == [out] and len(decided) == 1  # nothing planned, nothing decided again
+    assert reported[-1] == ({"runs": 1}, tmp_path / "again" / "report.md")
